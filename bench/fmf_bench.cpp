@@ -1,0 +1,106 @@
+// fmf factorization benchmark (issue: foundation; docs/benchmarks.md).
+//
+// Synthesizes a BTF (default: the Bonn UBO2003 size, 256 x 256 texels x 81 x 81 directions x RGB
+// = 1.29 G values, 5.2 GB float32), then factorizes it with `fmf` and reports wall time, peak
+// resident memory relative to the input, the GEMM rate achieved, and the relative L2 error
+// against a converged reference factorization (randomized SVD with many power iterations and a
+// large sketch, whose error is the Eckart-Young optimum to the printed digits; the exact
+// Gram path would need a 19683^2 eigen-decomposition).
+//
+//   bench_fmf [--width 256] [--height 256] [--rank 32] [--power-iters 4] [--oversample 16]
+//             [--reference] [--dump FILE]   (FILE: raw float32 matrix for scripts/bench_sklearn.py)
+#include <sys/resource.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <string>
+
+#include "codecs/codec.h"
+#include "codecs/fmf/svd.h"
+#include "core/synth.h"
+
+using namespace btfc;
+
+static double now_s() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+static double peak_rss_gb() {
+  rusage ru{};
+  getrusage(RUSAGE_SELF, &ru);
+  return double(ru.ru_maxrss) * 1024.0 / 1e9;
+}
+
+int main(int argc, char** argv) {
+  int width = 256, height = 256, rank = 32, power = 4, over = 16;
+  bool reference = false;
+  std::string dump;
+  for (int i = 1; i < argc; ++i) {
+    std::string a = argv[i];
+    auto next = [&] { return i + 1 < argc ? std::atoi(argv[++i]) : 0; };
+    if (a == "--width") width = next();
+    else if (a == "--height") height = next();
+    else if (a == "--rank") rank = next();
+    else if (a == "--power-iters") power = next();
+    else if (a == "--oversample") over = next();
+    else if (a == "--reference") reference = true;
+    else if (a == "--dump" && i + 1 < argc) dump = argv[++i];
+    else {
+      std::fprintf(stderr, "unknown argument %s\n", a.c_str());
+      return 1;
+    }
+  }
+  SynthOptions so;
+  so.width = width, so.height = height, so.seed = 1;
+  double t0 = now_s();
+  auto btf = synthesize_btf(so);
+  if (!btf.ok()) {
+    std::fprintf(stderr, "%s\n", btf.status().message().c_str());
+    return 2;
+  }
+  const double synth_s = now_s() - t0;
+  const BtfDesc& d = btf->desc();
+  const double input_gb = double(d.num_values()) * 4 / 1e9;
+  const double rss_after_input = peak_rss_gb();
+  std::printf("input: %s = %.3f G values, %.2f GB float32; synth %.1f s; peak RSS after synth %.2f GB\n", d.summary().c_str(),
+              double(d.num_values()) / 1e9, input_gb, synth_s, rss_after_input);
+  if (!dump.empty()) {
+    std::FILE* f = std::fopen(dump.c_str(), "wb");
+    if (!f || std::fwrite(btf->data(), 4, btf->size(), f) != btf->size()) return 2;
+    std::fclose(f);
+    std::printf("dumped %zu x %zu float32 matrix (column-major: rows = ABRDF, columns = texels) to %s\n", d.abrdf_size(),
+                d.num_texels(), dump.c_str());
+  }
+
+  auto run = [&](int q, int p, const char* label) {
+    fmf::SvdOptions opt;
+    opt.max_rank = rank, opt.power_iters = q, opt.oversample = p, opt.method = fmf::SvdMethod::randomized;
+    double t = now_s();
+    auto r = fmf::truncated_svd(btf->data(), d.abrdf_size(), d.num_texels(), opt);
+    const double secs = now_s() - t;
+    if (!r.ok()) {
+      std::fprintf(stderr, "%s\n", r.status().message().c_str());
+      std::exit(3);
+    }
+    // 2q + 2 GEMM passes over B of width l = rank + oversample.
+    const double l = double(rank + p), flops = (2.0 * q + 2) * 2.0 * double(d.num_values()) * l;
+    std::printf("%-10s rank %d q %d p %d: %.2f s, rel L2 error %.6f, %.0f GFLOP/s in the passes over B, peak RSS %.2f GB (%.2f x input)\n",
+                label, rank, q, p, secs, r->rel_error_estimate(), flops / secs / 1e9, peak_rss_gb(), peak_rss_gb() / input_gb);
+    return r->rel_error_estimate();
+  };
+  const double err = run(power, over, "fmf");
+  // The codec end to end (adds the half quantization and the model build).
+  auto spec = resolve_spec("fmf:rank=" + std::to_string(rank) + ":power_iters=" + std::to_string(power) + ":oversample=" + std::to_string(over));
+  Context ctx;
+  t0 = now_s();
+  auto model = spec->first->encode(btf.value(), spec->second, ctx);
+  std::printf("codec      %s: encode %.2f s, payload %.1f MB (ratio %.0f : 1 vs float32), peak RSS %.2f GB (%.2f x input)\n",
+              model.value()->spec().c_str(), now_s() - t0, double(model.value()->payload_bytes()) / 1e6,
+              double(d.num_values()) * 4 / double(model.value()->payload_bytes()), peak_rss_gb(), peak_rss_gb() / input_gb);
+  if (reference) {
+    const double ref = run(12, 96, "reference");
+    std::printf("error relative to the converged reference: %.4f (goal <= 1.01)\n", err / ref);
+  }
+  return 0;
+}

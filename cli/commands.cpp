@@ -1,0 +1,356 @@
+// btfc subcommands: call the library, print tables or JSON. No algorithms live here.
+#include "cli/commands.h"
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "codecs/codec.h"
+#include "core/container.h"
+#include "core/metrics.h"
+#include "core/synth.h"
+#include "formats/btf_io.h"
+
+namespace btfc::cli {
+
+using nlohmann::json;
+using Clock = std::chrono::steady_clock;
+
+int exit_code(const Status& s) {
+  switch (s.code()) {
+    case StatusCode::ok: return 0;
+    case StatusCode::invalid_argument: return 1;
+    case StatusCode::io_error:
+    case StatusCode::corrupt_data:
+    case StatusCode::unsupported: return 2;
+    case StatusCode::codec_error:
+    case StatusCode::device_error: return 3;
+  }
+  return 3;
+}
+
+int fail(const Global& g, const Status& s) {
+  if (g.json) std::cout << json{{"error", s.message()}, {"code", status_code_name(s.code())}}.dump(2) << "\n";
+  std::cerr << "error: " << s.message() << "\n";
+  return exit_code(s);
+}
+
+namespace {
+
+double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+// A finite JSON number, or null (JSON has no infinity).
+json num(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+
+Result<std::vector<int>> parse_ints(const std::string& text, const char* what) {
+  std::vector<int> out;
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    char* end = nullptr;
+    long v = std::strtol(item.c_str(), &end, 10);
+    if (item.empty() || *end != '\0') return invalid_argument(std::string(what) + ": '" + item + "' is not an integer");
+    out.push_back(int(v));
+  }
+  return out;
+}
+
+Result<Vec3> parse_theta_phi(const std::string& text, const char* what) {
+  double th = 0, ph = 0;
+  char extra = 0;
+  if (std::sscanf(text.c_str(), "%lf,%lf%c", &th, &ph, &extra) != 2 || !std::isfinite(th) || !std::isfinite(ph) || th < 0 || th > 180)
+    return invalid_argument(std::string(what) + ": expected THETA,PHI in degrees (theta in [0, 180]), got '" + text + "'");
+  const double k = 3.14159265358979323846 / 180.0;
+  return dir_from_theta_phi(th * k, ph * k);
+}
+
+Result<DirectionSet> parse_direction_set(const std::string& text, const char* what) {
+  if (text == "ubo2003") return DirectionSet::ubo2003();
+  if (text == "ubo2014") return DirectionSet::ubo2014();
+  BTFC_ASSIGN_OR_RETURN(Vec3 d, parse_theta_phi(text, what));
+  return DirectionSet::single(d);
+}
+
+void print_stats(const ModelStats& st, json* j) {
+  for (const auto& [k, v] : st.numbers) {
+    if (j) (*j)[k] = num(v);
+    else std::cout << "  " << k << " = " << v << "\n";
+  }
+  for (const auto& [k, v] : st.notes) {
+    if (j) (*j)[k] = v;
+    else std::cout << "  " << k << " = " << v << "\n";
+  }
+}
+
+}  // namespace
+
+int cmd_codecs(const Global& g, bool names_only) {
+  json j = json::array();
+  for (const Codec* c : all_codecs()) {
+    if (names_only) {
+      std::cout << c->name() << "\n";
+      continue;
+    }
+    if (g.json) {
+      json params = json::array();
+      for (const ParamSpec& p : c->params()) {
+        json jp{{"name", p.name}, {"default", p.default_value}, {"help", p.help}};
+        if (p.type == ParamSpec::Type::choice) jp["choices"] = p.choices;
+        else jp["type"] = p.type == ParamSpec::Type::integer ? "int" : "real", jp["min"] = p.min, jp["max"] = p.max;
+        params.push_back(jp);
+      }
+      j.push_back({{"name", c->name()}, {"summary", c->summary()}, {"payload_version", c->payload_version()}, {"params", params}});
+    } else {
+      std::cout << c->name() << " - " << c->summary() << "\n" << describe_params(c->params());
+    }
+  }
+  if (g.json && !names_only) std::cout << j.dump(2) << "\n";
+  return 0;
+}
+
+int cmd_synth(const Global& g, const SynthArgs& a) {
+  SynthOptions o;
+  o.width = a.width;
+  o.height = a.height;
+  o.seed = a.seed;
+  o.bump = a.bump;
+  o.scale = a.scale;
+  auto lights = parse_direction_set(a.lights, "--lights");
+  if (!lights.ok()) return fail(g, lights.status());
+  auto views = parse_direction_set(a.views, "--views");
+  if (!views.ok()) return fail(g, views.status());
+  o.lights = lights.value();
+  o.views = views.value();
+  auto btf = synthesize_btf(o);
+  if (!btf.ok()) return fail(g, btf.status());
+  Status s = write_btf(btf.value(), a.out, a.format == "png" ? ImageFormat::png : ImageFormat::exr);
+  if (!s.ok()) return fail(g, s);
+  if (g.json) std::cout << json{{"output", a.out}, {"desc", btf->desc().summary()}}.dump(2) << "\n";
+  else if (!g.quiet) std::cout << "wrote " << a.out << ": " << btf->desc().summary() << "\n";
+  return 0;
+}
+
+int cmd_info(const Global& g, const std::string& path, bool verify) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) {
+    auto btf = read_btf(path);
+    if (!btf.ok()) return fail(g, btf.status());
+    const BtfDesc& d = btf->desc();
+    if (g.json) std::cout << json{{"path", path}, {"kind", "image set"}, {"desc", d.summary()}, {"hdr", d.hdr}}.dump(2) << "\n";
+    else std::cout << path << ": image set, " << d.summary() << (d.hdr ? ", HDR" : ", LDR (sRGB-decoded)") << "\n";
+    return 0;
+  }
+  auto rd = ContainerReader::open(path);
+  if (!rd.ok()) return fail(g, rd.status());
+  if (verify) {
+    Status s = rd->verify_all();
+    if (!s.ok()) return fail(g, s);
+  }
+  const BtfDesc& d = rd->desc();
+  const uint64_t raw_bytes = uint64_t(d.num_values()) * 4;
+  json j{{"path", path}, {"desc", d.summary()}, {"width", d.width}, {"height", d.height}, {"channels", d.channels},
+         {"lights", d.num_lights()}, {"views", d.num_views()}, {"codec", rd->codec().name}, {"spec", rd->codec().spec},
+         {"payload_version", rd->codec().payload_version}, {"written_by", rd->codec().btfc_version},
+         {"file_bytes", rd->file_size()}, {"ratio_vs_float32", double(raw_bytes) / double(rd->file_size())}};
+  if (verify) j["verified"] = true;
+  json tensors = json::array();
+  for (const TensorInfo& t : rd->tensors()) tensors.push_back({{"name", t.name}, {"dtype", dtype_name(t.dtype)}, {"shape", t.shape}, {"bytes", t.size}});
+  j["tensors"] = tensors;
+  if (rd->codec().name != "raw") {
+    auto model = load_model(rd.value());
+    if (!model.ok()) return fail(g, model.status());
+    json st;
+    print_stats(model.value()->stats(), &st);
+    j["stats"] = st;
+  }
+  j["encode_stats"] = rd->stats();
+  if (g.json) {
+    std::cout << j.dump(2) << "\n";
+    return 0;
+  }
+  std::cout << path << ": " << rd->codec().name << " (" << rd->codec().spec << "), payload v" << rd->codec().payload_version
+            << ", written by btfc " << rd->codec().btfc_version << "\n"
+            << "  " << d.summary() << (d.hdr ? ", HDR" : "") << "\n"
+            << "  " << rd->file_size() << " bytes, ratio " << j["ratio_vs_float32"].get<double>() << " : 1 vs float32"
+            << (verify ? ", all checksums verified" : "") << "\n";
+  for (const TensorInfo& t : rd->tensors()) {
+    std::cout << "  tensor " << t.name << " " << dtype_name(t.dtype) << " [";
+    for (size_t i = 0; i < t.shape.size(); ++i) std::cout << (i ? " x " : "") << t.shape[i];
+    std::cout << "] " << t.size << " bytes\n";
+  }
+  if (!rd->stats().empty()) {
+    std::cout << "  encode statistics:\n";
+    std::stringstream ss(rd->stats());
+    for (std::string line; std::getline(ss, line);) std::cout << "    " << line << "\n";
+  }
+  return 0;
+}
+
+int cmd_compress(const Global& g, const CompressArgs& a) {
+  auto resolved = resolve_spec(a.spec);
+  if (!resolved.ok()) return fail(g, resolved.status());
+  auto [codec, params] = std::move(resolved).value();
+  auto t0 = Clock::now();
+  auto btf = read_btf(a.in);
+  if (!btf.ok()) return fail(g, btf.status());
+  const double read_s = seconds_since(t0);
+  Progress progress(g.quiet || g.json);
+  Context ctx;
+  ctx.seed = a.seed;
+  ctx.progress = &progress;
+  t0 = Clock::now();
+  auto model = codec->encode(btf.value(), params, ctx);
+  if (!model.ok()) return fail(g, model.status().with_context(a.in));
+  const double enc_s = seconds_since(t0);
+  Status s = save_model(*model.value(), *codec, a.out);
+  if (!s.ok()) return fail(g, s);
+  const double ratio = double(btf->desc().num_values()) * 4.0 / double(std::filesystem::file_size(a.out));
+  if (g.json) {
+    json j{{"input", a.in}, {"output", a.out}, {"spec", model.value()->spec()}, {"read_seconds", read_s},
+           {"encode_seconds", enc_s}, {"file_bytes", std::filesystem::file_size(a.out)}, {"ratio_vs_float32", ratio}};
+    json st;
+    print_stats(model.value()->stats(), &st);
+    j["stats"] = st;
+    std::cout << j.dump(2) << "\n";
+  } else if (!g.quiet) {
+    std::cout << "compressed " << a.in << " (" << btf->desc().summary() << ") with " << model.value()->spec() << "\n"
+              << "  -> " << a.out << ", ratio " << ratio << " : 1 vs float32, encode " << enc_s << " s\n";
+    print_stats(model.value()->stats(), nullptr);
+  }
+  return 0;
+}
+
+int cmd_decompress(const Global& g, const DecompressArgs& a) {
+  auto rd = ContainerReader::open(a.in);
+  if (!rd.ok()) return fail(g, rd.status());
+  auto model = load_model(rd.value());
+  if (!model.ok()) return fail(g, model.status());
+  DecodeRequest req;
+  if (!a.region.empty()) {
+    auto r = parse_ints(a.region, "--region");
+    if (!r.ok()) return fail(g, r.status());
+    if (r->size() != 4) return fail(g, invalid_argument("--region: expected x,y,w,h"));
+    req.x0 = (*r)[0], req.y0 = (*r)[1], req.width = (*r)[2], req.height = (*r)[3];
+  }
+  for (auto [text, dst, what] : {std::tuple{&a.lights, &req.lights, "--lights"}, std::tuple{&a.views, &req.views, "--views"}}) {
+    if (text->empty()) continue;
+    auto v = parse_ints(*text, what);
+    if (!v.ok()) return fail(g, v.status());
+    *dst = v.value();
+  }
+  auto t0 = Clock::now();
+  Btf out;
+  Status s = model.value()->decode(req, out);
+  if (!s.ok()) return fail(g, s.with_context(a.in));
+  const double dec_s = seconds_since(t0);
+  s = write_btf(out, a.out, a.format == "png" ? ImageFormat::png : ImageFormat::exr);
+  if (!s.ok()) return fail(g, s);
+  if (g.json) std::cout << json{{"output", a.out}, {"desc", out.desc().summary()}, {"decode_seconds", dec_s}}.dump(2) << "\n";
+  else if (!g.quiet) std::cout << "decoded " << a.in << " -> " << a.out << ": " << out.desc().summary() << " in " << dec_s << " s\n";
+  return 0;
+}
+
+int cmd_eval(const Global& g, const EvalArgs& a) {
+  auto xy = parse_ints(a.texel, "--texel");
+  if (!xy.ok()) return fail(g, xy.status());
+  if (xy->size() != 2) return fail(g, invalid_argument("--texel: expected X,Y"));
+  auto rd = ContainerReader::open(a.in);
+  if (!rd.ok()) return fail(g, rd.status());
+  auto model = load_model(rd.value());
+  if (!model.ok()) return fail(g, model.status());
+  const Model& m = *model.value();
+  const BtfDesc& d = m.desc();
+  const int x = (*xy)[0], y = (*xy)[1];
+  if (x < 0 || y < 0 || x >= d.width || y >= d.height)
+    return fail(g, invalid_argument("--texel " + a.texel + " is outside the " + std::to_string(d.width) + "x" + std::to_string(d.height) + " texels"));
+  std::vector<float> out(size_t(d.channels));
+  const bool measured = a.light.has_value() || a.view.has_value();
+  if (measured == (!a.wl.empty() || !a.wv.empty()))
+    return fail(g, invalid_argument("give either --light and --view (measured indices) or --wl and --wv (directions)"));
+  if (measured) {
+    if (!a.light || !a.view) return fail(g, invalid_argument("--light and --view go together"));
+    if (*a.light < 0 || size_t(*a.light) >= d.num_lights() || *a.view < 0 || size_t(*a.view) >= d.num_views())
+      return fail(g, invalid_argument("--light/--view index outside the direction sets (" + std::to_string(d.num_lights()) +
+                                      " lights, " + std::to_string(d.num_views()) + " views)"));
+    m.eval(x, y, *a.light, *a.view, out.data());
+  } else {
+    if (a.wl.empty() || a.wv.empty()) return fail(g, invalid_argument("--wl and --wv go together"));
+    auto wl = parse_theta_phi(a.wl, "--wl");
+    if (!wl.ok()) return fail(g, wl.status());
+    auto wv = parse_theta_phi(a.wv, "--wv");
+    if (!wv.ok()) return fail(g, wv.status());
+    Status s = m.eval_dir(x, y, wl.value(), wv.value(), out.data());
+    if (!s.ok()) return fail(g, s);
+  }
+  if (g.json) {
+    std::cout << json{{"texel", {x, y}}, {"value", out}}.dump(2) << "\n";
+  } else {
+    for (size_t c = 0; c < out.size(); ++c) std::printf("%s%.9g", c ? " " : "", double(out[c]));
+    std::printf("\n");
+  }
+  return 0;
+}
+
+int cmd_compare(const Global& g, const CompareArgs& a) {
+  auto ra = read_btf(a.a);
+  if (!ra.ok()) return fail(g, ra.status());
+  auto rb = read_btf(a.b);
+  if (!rb.ok()) return fail(g, rb.status());
+  auto m = compare_btf(ra.value(), rb.value(), a.ssim);
+  if (!m.ok()) return fail(g, m.status().with_context(a.a + " vs " + a.b));
+  const Metrics& x = m.value();
+  if (g.json) {
+    json j{{"rmse", x.rmse}, {"rel_l2", num(x.rel_l2)}, {"psnr", num(x.psnr)}, {"psnr_peak", x.peak}, {"max_abs", x.max_abs}};
+    if (a.ssim) j["mean_ssim"] = x.mean_ssim;
+    std::cout << j.dump(2) << "\n";
+  } else {
+    std::printf("RMSE %.6g  relL2 %.6g  PSNR %.3f dB (peak %.6g)  max|err| %.6g", x.rmse, x.rel_l2, x.psnr, x.peak, x.max_abs);
+    if (a.ssim) std::printf("  mean SSIM %.5f", x.mean_ssim);
+    std::printf("\n");
+  }
+  return 0;
+}
+
+int cmd_bench(const Global& g, const BenchArgs& a) {
+  auto btf = read_btf(a.in);
+  if (!btf.ok()) return fail(g, btf.status());
+  const std::string label = a.label.empty() ? a.in : a.label;
+  json rows = json::array();
+  if (!g.json && a.header)
+    std::printf("%-22s %-44s %9s %10s %9s %8s %9s %9s\n", "data", "codec", "ratio", "RMSE", "PSNR", "SSIM", "enc s", "dec s");
+  for (const std::string& spec : a.specs) {
+    auto resolved = resolve_spec(spec);
+    if (!resolved.ok()) return fail(g, resolved.status());
+    auto [codec, params] = std::move(resolved).value();
+    Progress progress(g.quiet || g.json);
+    Context ctx;
+    ctx.seed = a.seed;
+    ctx.progress = &progress;
+    auto t0 = Clock::now();
+    auto model = codec->encode(btf.value(), params, ctx);
+    if (!model.ok()) return fail(g, model.status().with_context(a.in));
+    const double enc_s = seconds_since(t0);
+    t0 = Clock::now();
+    Btf out;
+    Status s = model.value()->decode_all(out);
+    if (!s.ok()) return fail(g, s);
+    const double dec_s = seconds_since(t0);
+    auto m = compare_btf(btf.value(), out, true);
+    if (!m.ok()) return fail(g, m.status());
+    const double ratio = double(btf->desc().num_values()) * 4.0 / double(model.value()->payload_bytes());
+    rows.push_back({{"data", label}, {"spec", model.value()->spec()}, {"ratio", ratio}, {"payload_bytes", model.value()->payload_bytes()},
+                    {"rmse", m->rmse}, {"rel_l2", num(m->rel_l2)}, {"psnr", num(m->psnr)}, {"mean_ssim", m->mean_ssim},
+                    {"encode_seconds", enc_s}, {"decode_seconds", dec_s}});
+    if (!g.json)
+      std::printf("%-22s %-44s %9.2f %10.4g %9.3f %8.5f %9.3f %9.3f\n", label.c_str(), model.value()->spec().c_str(), ratio,
+                  m->rmse, m->psnr, m->mean_ssim, enc_s, dec_s);
+  }
+  if (g.json) std::cout << rows.dump(2) << "\n";
+  return 0;
+}
+
+}  // namespace btfc::cli

@@ -1,0 +1,71 @@
+// The btfc subcommands. main.cpp parses the command line (CLI11) into these structs; the
+// functions here only call the library and print. Each returns the process exit code:
+// 0 ok, 1 usage / invalid argument, 2 I/O or format error, 3 codec or device error.
+#pragma once
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/status.h"
+
+namespace btfc::cli {
+
+struct Global {
+  bool json = false;
+  bool quiet = false;
+};
+
+int exit_code(const Status& s);
+int fail(const Global& g, const Status& s);  // prints "error: ..." (or JSON) and returns exit_code
+
+struct SynthArgs {
+  std::string out;
+  int width = 32, height = 32;
+  std::string lights = "ubo2003", views = "ubo2003";  // ubo2003 | ubo2014 | "THETA,PHI" (one direction, degrees)
+  unsigned long long seed = 1;
+  float bump = 1.0f, scale = 1.0f;
+  std::string format = "exr";  // image-set output: exr | png
+};
+
+struct CompressArgs {
+  std::string in, out, spec;
+  unsigned long long seed = 1;
+};
+
+struct DecompressArgs {
+  std::string in, out;
+  std::string region;               // "x,y,w,h"
+  std::string lights, views;        // "0,3,5"
+  std::string format = "exr";
+};
+
+struct EvalArgs {
+  std::string in;
+  std::string texel;                // "x,y"
+  std::optional<int> light, view;   // measured indices
+  std::string wl, wv;               // "theta,phi" in degrees
+};
+
+struct CompareArgs {
+  std::string a, b;
+  bool ssim = true;
+};
+
+struct BenchArgs {
+  std::string in;
+  std::vector<std::string> specs;
+  std::string label;
+  bool header = true;
+  unsigned long long seed = 1;
+};
+
+int cmd_codecs(const Global& g, bool names_only);
+int cmd_synth(const Global& g, const SynthArgs& a);
+int cmd_info(const Global& g, const std::string& path, bool verify);
+int cmd_compress(const Global& g, const CompressArgs& a);
+int cmd_decompress(const Global& g, const DecompressArgs& a);
+int cmd_eval(const Global& g, const EvalArgs& a);
+int cmd_compare(const Global& g, const CompareArgs& a);
+int cmd_bench(const Global& g, const BenchArgs& a);
+
+}  // namespace btfc::cli

@@ -1,0 +1,105 @@
+// btfc: the command-line front end. Parses arguments (CLI11) and dispatches to cli/commands.cpp.
+#include <CLI/CLI.hpp>
+#include <iostream>
+
+#include "cli/commands.h"
+
+int main(int argc, char** argv) {
+  using namespace btfc::cli;
+  CLI::App app{"btfc - compression toolkit for Bidirectional Texture Functions"};
+  app.require_subcommand(1);
+  Global g;
+  app.add_flag("--json", g.json, "machine-readable JSON output on stdout");
+  app.add_flag("-q,--quiet", g.quiet, "no progress bar or chatter");
+  int code = 0;
+
+  bool names_only = false;
+  auto* codecs = app.add_subcommand("codecs", "list the registered codecs and their parameters");
+  codecs->add_flag("--names", names_only, "only the names, one per line");
+  codecs->callback([&] { code = cmd_codecs(g, names_only); });
+
+  SynthArgs sy;
+  auto* synth = app.add_subcommand("synth", "write a deterministic synthetic BTF (height field, shadows, spatially varying material)");
+  synth->add_option("-o,--output", sy.out, "output: FILE.btfc (raw) or a directory (UTIA image set)")->required();
+  synth->add_option("--width", sy.width, "texels")->check(CLI::Range(1, 1 << 16));
+  synth->add_option("--height", sy.height, "texels")->check(CLI::Range(1, 1 << 16));
+  synth->add_option("--lights", sy.lights, "ubo2003 | ubo2014 | THETA,PHI (one direction, degrees)");
+  synth->add_option("--views", sy.views, "ubo2003 | ubo2014 | THETA,PHI (one direction, degrees)");
+  synth->add_option("--seed", sy.seed, "random seed");
+  synth->add_option("--bump", sy.bump, "height-field amplitude (0 = flat)")->check(CLI::Range(0.0, 100.0));
+  synth->add_option("--scale", sy.scale, "multiplies all values (HDR)")->check(CLI::Range(1e-30, 1e30));
+  synth->add_option("--format", sy.format, "image-set format")->check(CLI::IsMember({"exr", "png"}));
+  synth->callback([&] { code = cmd_synth(g, sy); });
+
+  std::string info_path;
+  bool verify = false;
+  auto* info = app.add_subcommand("info", "describe a .btfc file or an image set");
+  info->add_option("file", info_path, "FILE.btfc or image-set directory")->required();
+  info->add_flag("--verify", verify, "read every tensor and check its checksum");
+  info->callback([&] { code = cmd_info(g, info_path, verify); });
+
+  CompressArgs ca;
+  auto* compress = app.add_subcommand("compress", "compress a BTF into a model (.btfc)");
+  compress->add_option("input", ca.in, "image-set directory or raw .btfc")->required();
+  compress->add_option("-c,--codec", ca.spec, "codec spec string, e.g. fmf:rank=32:precision=half")->required();
+  compress->add_option("-o,--output", ca.out, "output .btfc")->required();
+  compress->add_option("--seed", ca.seed, "random seed (randomized algorithms)");
+  compress->callback([&] { code = cmd_compress(g, ca); });
+
+  DecompressArgs da;
+  auto* decompress = app.add_subcommand("decompress", "decode a model, fully or a region / direction subset");
+  decompress->add_option("input", da.in, "model .btfc")->required();
+  decompress->add_option("-o,--output", da.out, "FILE.btfc (raw) or a directory (UTIA image set)")->required();
+  decompress->add_option("--region", da.region, "x,y,w,h texel rectangle");
+  decompress->add_option("--lights", da.lights, "comma-separated light indices");
+  decompress->add_option("--views", da.views, "comma-separated view indices");
+  decompress->add_option("--format", da.format, "image-set format")->check(CLI::IsMember({"exr", "png"}));
+  decompress->callback([&] { code = cmd_decompress(g, da); });
+
+  EvalArgs ea;
+  int light = -1, view = -1;
+  auto* eval = app.add_subcommand("eval", "evaluate a model at one texel, at measured or arbitrary directions");
+  eval->add_option("input", ea.in, "model .btfc")->required();
+  eval->add_option("--texel", ea.texel, "X,Y")->required();
+  auto* ol = eval->add_option("--light", light, "measured light index");
+  auto* ov = eval->add_option("--view", view, "measured view index");
+  eval->add_option("--wl", ea.wl, "light direction THETA,PHI in degrees (interpolated)");
+  eval->add_option("--wv", ea.wv, "view direction THETA,PHI in degrees (interpolated)");
+  eval->callback([&] {
+    if (ol->count()) ea.light = light;
+    if (ov->count()) ea.view = view;
+    code = cmd_eval(g, ea);
+  });
+
+  CompareArgs cm;
+  bool no_ssim = false;
+  auto* compare = app.add_subcommand("compare", "error metrics between two BTFs (RMSE, relative L2, PSNR, mean SSIM)");
+  compare->add_option("reference", cm.a, "reference BTF (image set, raw or model .btfc)")->required();
+  compare->add_option("test", cm.b, "test BTF")->required();
+  compare->add_flag("--no-ssim", no_ssim, "skip SSIM");
+  compare->callback([&] {
+    cm.ssim = !no_ssim;
+    code = cmd_compare(g, cm);
+  });
+
+  BenchArgs ba;
+  bool no_header = false;
+  auto* bench = app.add_subcommand("bench", "compress, decode and compare with one or more codec specs; one table row each");
+  bench->add_option("input", ba.in, "BTF (image set or raw .btfc)")->required();
+  bench->add_option("-c,--codec", ba.specs, "codec spec (repeatable)")->required();
+  bench->add_option("--label", ba.label, "data label in the table");
+  bench->add_option("--seed", ba.seed, "random seed");
+  bench->add_flag("--no-header", no_header, "omit the table header");
+  bench->callback([&] {
+    ba.header = !no_header;
+    code = cmd_bench(g, ba);
+  });
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int rc = app.exit(e);
+    return rc == 0 ? 0 : 1;
+  }
+  return code;
+}

@@ -1,0 +1,84 @@
+// Codec-independent helpers: spec resolution, model files, decode requests.
+#include <algorithm>
+#include <sstream>
+
+#include "codecs/codec.h"
+
+namespace btfc {
+
+Result<std::pair<const Codec*, Params>> resolve_spec(const std::string& spec) {
+  BTFC_ASSIGN_OR_RETURN(SpecString s, parse_spec_string(spec));
+  const Codec* codec = find_codec(s.codec);
+  if (!codec) {
+    std::string names;
+    for (const Codec* c : all_codecs()) names += (names.empty() ? "" : ", ") + std::string(c->name());
+    return invalid_argument("unknown codec '" + s.codec + "' (registered: " + names + ")");
+  }
+  BTFC_ASSIGN_OR_RETURN(Params p, bind_params(s, codec->params()));
+  return std::make_pair(codec, std::move(p));
+}
+
+static std::string stats_text(const ModelStats& st) {
+  std::ostringstream os;
+  os.precision(9);
+  for (const auto& [k, v] : st.numbers) os << k << " = " << v << "\n";
+  for (const auto& [k, v] : st.notes) os << k << " = " << v << "\n";
+  return os.str();
+}
+
+Status save_model(const Model& model, const Codec& codec, const std::string& path) {
+  ContainerWriter w;
+  w.set_desc(model.desc());
+  w.set_codec({codec.name(), codec.payload_version(), model.spec(), btfc_version()});
+  BTFC_RETURN_IF_ERROR(model.save(w));
+  w.set_stats(stats_text(model.stats()));
+  return w.write(path);
+}
+
+Result<std::unique_ptr<Model>> load_model(const ContainerReader& reader) {
+  const std::string& name = reader.codec().name;
+  if (name == "raw") return invalid_argument(reader.path() + ": holds an uncompressed BTF, not a model");
+  const Codec* codec = find_codec(name);
+  if (!codec) return unsupported(reader.path() + ": unknown codec '" + name + "'");
+  return codec->load(reader);
+}
+
+Result<ResolvedRequest> resolve_request(const BtfDesc& src, const DecodeRequest& req) {
+  ResolvedRequest r;
+  r.x0 = req.x0;
+  r.y0 = req.y0;
+  const int w = req.width < 0 ? src.width - req.x0 : req.width;
+  const int h = req.height < 0 ? src.height - req.y0 : req.height;
+  if (req.x0 < 0 || req.y0 < 0 || w <= 0 || h <= 0 || req.x0 + w > src.width || req.y0 + h > src.height) {
+    std::ostringstream os;
+    os << "region (" << req.x0 << ", " << req.y0 << ") size " << w << "x" << h << " is outside the " << src.width << "x"
+       << src.height << " texels";
+    return invalid_argument(os.str());
+  }
+  auto pick = [](const DirectionSet& set, const std::vector<int>& want, std::vector<int>& idx, DirectionSet& out,
+                 const char* what) -> Status {
+    out.dirs.clear();
+    idx.clear();
+    if (want.empty()) {
+      for (size_t i = 0; i < set.size(); ++i) idx.push_back(int(i));
+      out = set;
+      return {};
+    }
+    for (int i : want) {
+      if (i < 0 || size_t(i) >= set.size())
+        return invalid_argument(std::string(what) + " index " + std::to_string(i) + " outside [0, " + std::to_string(set.size()) + ")");
+      idx.push_back(i);
+      out.dirs.push_back(set.dirs[size_t(i)]);
+    }
+    out.identify();
+    return {};
+  };
+  r.desc = src;
+  r.desc.width = w;
+  r.desc.height = h;
+  BTFC_RETURN_IF_ERROR(pick(src.lights, req.lights, r.lights, r.desc.lights, "light"));
+  BTFC_RETURN_IF_ERROR(pick(src.views, req.views, r.views, r.desc.views, "view"));
+  return r;
+}
+
+}  // namespace btfc

@@ -1,0 +1,99 @@
+// Codec and Model: the two interfaces every compression algorithm implements.
+//
+// A Codec is a stateless factory: parameters (a spec string bound to its ParamSpec table) +
+// a Btf -> a Model. A Model is the compressed representation: it decodes (fully, by texel
+// region and by light/view subset), evaluates single values at measured or arbitrary
+// directions, saves itself as container tensors and reports statistics. Codecs are listed in an
+// explicit table (codecs/registry.cpp); adding one is one folder and one line there.
+#pragma once
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "core/btf.h"
+#include "core/container.h"
+#include "core/params.h"
+#include "core/progress.h"
+#include "core/status.h"
+
+namespace btfc {
+
+// Run-time context: deterministic seed, progress sink, memory limit.
+struct Context {
+  uint64_t seed = 1;
+  Progress* progress = nullptr;  // may be null
+  size_t max_bytes = size_t(1) << 40;
+};
+
+// A texel rectangle plus light/view index subsets (empty = all) to decode.
+struct DecodeRequest {
+  int x0 = 0, y0 = 0, width = -1, height = -1;  // -1 = to the edge
+  std::vector<int> lights, views;
+};
+
+// Named statistics, in insertion order, for `btfc info` / `--json`.
+struct ModelStats {
+  std::vector<std::pair<std::string, double>> numbers;
+  std::vector<std::pair<std::string, std::string>> notes;
+  void add(std::string k, double v) { numbers.emplace_back(std::move(k), v); }
+  void note(std::string k, std::string v) { notes.emplace_back(std::move(k), std::move(v)); }
+};
+
+class Model {
+ public:
+  virtual ~Model() = default;
+  virtual const BtfDesc& desc() const = 0;
+  virtual const std::string& spec() const = 0;  // canonical spec string it was made with
+
+  // Decodes a region / direction subset into `out`, which this call (re)creates with the
+  // request's shape (subset direction sets, region size).
+  virtual Status decode(const DecodeRequest& req, Btf& out) const = 0;
+  // Value at a texel and a measured (light, view) index pair; `out` has desc().channels floats.
+  virtual void eval(int x, int y, int light, int view, float* out) const = 0;
+  // Value at arbitrary directions, interpolated between measured ones (9 lookups).
+  virtual Status eval_dir(int x, int y, const Vec3& wl, const Vec3& wv, float* out) const = 0;
+
+  // Writes the model's tensors (the container's DESC and CODC are written by the caller).
+  virtual Status save(ContainerWriter& w) const = 0;
+  // Bytes of the stored model payload (tensors), for the compression ratio.
+  virtual uint64_t payload_bytes() const = 0;
+  virtual ModelStats stats() const = 0;
+
+  Status decode_all(Btf& out) const { return decode(DecodeRequest{}, out); }
+};
+
+class Codec {
+ public:
+  virtual ~Codec() = default;
+  virtual const char* name() const = 0;
+  virtual const char* summary() const = 0;  // one line, with the paper
+  virtual uint32_t payload_version() const = 0;
+  virtual std::span<const ParamSpec> params() const = 0;
+  virtual Result<std::unique_ptr<Model>> encode(const Btf& btf, const Params& params, Context& ctx) const = 0;
+  // Rebuilds a model from a container; rejects payload versions newer than payload_version().
+  virtual Result<std::unique_ptr<Model>> load(const ContainerReader& reader) const = 0;
+};
+
+// The explicit codec table.
+std::span<const Codec* const> all_codecs();
+const Codec* find_codec(const std::string& name);
+
+// Parses and binds a spec string ("fmf:rank=32") to its codec's parameter table.
+Result<std::pair<const Codec*, Params>> resolve_spec(const std::string& spec);
+
+// Saves a model as a .btfc (DESC + CODC + tensors + STAT), atomically.
+Status save_model(const Model& model, const Codec& codec, const std::string& path);
+// Opens a .btfc holding a model (codec != "raw").
+Result<std::unique_ptr<Model>> load_model(const ContainerReader& reader);
+
+// Builds the BtfDesc and index lists a DecodeRequest selects, validating the request.
+struct ResolvedRequest {
+  BtfDesc desc;                 // output shape
+  int x0 = 0, y0 = 0;
+  std::vector<int> lights, views;  // source indices, one per output direction
+};
+Result<ResolvedRequest> resolve_request(const BtfDesc& src, const DecodeRequest& req);
+
+}  // namespace btfc

@@ -1,0 +1,358 @@
+// fmf codec and model; see fmf.h for the paper, the colour modes and the stored tensors.
+#include "codecs/fmf/fmf.h"
+
+#include <Eigen/Core>
+#include <Imath/half.h>
+#include <chrono>
+#include <cmath>
+
+#include "codecs/fmf/svd.h"
+#include "core/interp.h"
+
+namespace btfc {
+namespace {
+
+using fmf::MatrixXfR;
+using Eigen::Index;
+
+constexpr uint32_t k_payload_version = 1;
+constexpr float k_drr_eps = 1e-5f;  // Bonn's dynamic-range-reduction epsilon (not stored in DFMF files)
+
+// YUV as Bonn's colour models 1/11 (formats.md 2.2): RGB = M YUV with
+// M = [1 0 1.13983; 1 -0.39465 -0.5806; 1 2.03211 0]. The forward matrix is M's exact inverse
+// (computed, not the rounded textbook YUV coefficients, which would cost 1e-5 relative error).
+constexpr float k_rgb_from_yuv[3][3] = {{1, 0, 1.13983f}, {1, -0.39465f, -0.5806f}, {1, 2.03211f, 0}};
+
+struct YuvFromRgb {
+  float m[3][3];
+  YuvFromRgb() {
+    double a[3][3];
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) a[i][j] = k_rgb_from_yuv[i][j];
+    const double det = a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0]) +
+                       a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]);
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) {  // adjugate / det
+        const int r0 = (j + 1) % 3, r1 = (j + 2) % 3, c0 = (i + 1) % 3, c1 = (i + 2) % 3;
+        m[i][j] = float((a[r0][c0] * a[r1][c1] - a[r0][c1] * a[r1][c0]) / det);
+      }
+  }
+};
+const YuvFromRgb k_yuv;
+
+const ParamSpec k_params[] = {
+    {"rank", ParamSpec::Type::integer, "32", 1, 4096, {}, "components C kept (upper bound when target_error is set)"},
+    {"chroma_rank", ParamSpec::Type::integer, "0", 0, 4096, {}, "color=dfmf: components of the U and V channels (0 = rank)"},
+    {"target_error", ParamSpec::Type::real, "0", 0, 1, {}, "if > 0: smallest rank whose relative L2 error (of the factorized matrix) is <= this"},
+    {"color", ParamSpec::Type::choice, "rgb", 0, 0, {"rgb", "dfmf"}, "rgb: colour in the matrix rows (paper); dfmf: per-channel log-luminance/chroma (Bonn DFMF model 11)"},
+    {"svd", ParamSpec::Type::choice, "auto", 0, 0, {"auto", "exact", "randomized"}, "auto: exact when the small side of the matrix is <= 1024, else randomized"},
+    {"oversample", ParamSpec::Type::integer, "16", 0, 1024, {}, "randomized SVD: extra sketch columns"},
+    {"power_iters", ParamSpec::Type::integer, "4", 0, 32, {}, "randomized SVD: power iterations"},
+    {"precision", ParamSpec::Type::choice, "half", 0, 0, {"half", "float"}, "storage of U and SxV"},
+};
+
+struct Block {
+  std::string name;
+  MatrixXfR U;        // rows x C
+  MatrixXfR SxV;      // texels x C, dequantized (scale applied)
+  Eigen::VectorXf S;  // C
+  Eigen::VectorXf scale;
+};
+
+struct Config {
+  bool dfmf = false;
+  bool half = true;
+};
+
+Config config_from(const Params& p) { return {p.get("color") == "dfmf", p.get("precision") == "half"}; }
+
+class FmfModel final : public Model {
+ public:
+  FmfModel(BtfDesc desc, std::string spec, Config cfg, std::vector<Block> blocks)
+      : m_desc(std::move(desc)), m_spec(std::move(spec)), m_cfg(cfg), m_blocks(std::move(blocks)),
+        m_light_interp(m_desc.lights), m_view_interp(m_desc.views) {}
+
+  const BtfDesc& desc() const override { return m_desc; }
+  const std::string& spec() const override { return m_spec; }
+  ModelStats& mutable_stats() { return m_stats; }
+  const std::vector<Block>& blocks() const { return m_blocks; }
+
+  void eval(int x, int y, int l, int v, float* out) const override {
+    const Index t = Index(x) + Index(m_desc.width) * y;
+    if (!m_cfg.dfmf) {
+      const Block& b = m_blocks[0];
+      for (int c = 0; c < m_desc.channels; ++c)
+        out[c] = b.U.row(Index(m_desc.row(l, v, c))).dot(b.SxV.row(t));
+      return;
+    }
+    const Index r = Index(l) + Index(m_desc.num_lights()) * v;
+    float yuv[3];
+    for (int k = 0; k < 3; ++k) yuv[k] = m_blocks[k].U.row(r).dot(m_blocks[k].SxV.row(t));
+    undecorrelate(yuv, out);
+  }
+
+  Status eval_dir(int x, int y, const Vec3& wl, const Vec3& wv, float* out) const override {
+    if (x < 0 || y < 0 || x >= m_desc.width || y >= m_desc.height)
+      return invalid_argument("texel (" + std::to_string(x) + ", " + std::to_string(y) + ") outside the BTF");
+    DirWeights a = m_light_interp.weights(wl), b = m_view_interp.weights(wv);
+    float acc[64] = {0}, tmp[64];
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) {
+        const float w = a.weight[i] * b.weight[j];
+        if (w == 0) continue;
+        eval(x, y, a.index[i], b.index[j], tmp);
+        for (int c = 0; c < m_desc.channels; ++c) acc[c] += w * tmp[c];
+      }
+    for (int c = 0; c < m_desc.channels; ++c) out[c] = acc[c];
+    return {};
+  }
+
+  Status decode(const DecodeRequest& req, Btf& out) const override;
+  Status save(ContainerWriter& w) const override;
+  uint64_t payload_bytes() const override {
+    uint64_t bytes = 0, scalar = m_cfg.half ? 2 : 4;
+    for (const Block& b : m_blocks) bytes += scalar * uint64_t(b.U.size() + b.SxV.size()) + 8 * uint64_t(b.S.size());
+    return bytes;
+  }
+  ModelStats stats() const override { return m_stats; }
+
+ private:
+  static void undecorrelate(const float* ylog_u_v, float* rgb) {
+    const float y = std::exp(ylog_u_v[0]) - k_drr_eps;
+    const float yuv[3] = {y, ylog_u_v[1] * (y + k_drr_eps), ylog_u_v[2] * (y + k_drr_eps)};
+    for (int c = 0; c < 3; ++c)
+      rgb[c] = k_rgb_from_yuv[c][0] * yuv[0] + k_rgb_from_yuv[c][1] * yuv[1] + k_rgb_from_yuv[c][2] * yuv[2];
+  }
+
+  BtfDesc m_desc;
+  std::string m_spec;
+  Config m_cfg;
+  std::vector<Block> m_blocks;
+  DirectionInterpolator m_light_interp, m_view_interp;
+  ModelStats m_stats;
+};
+
+Status FmfModel::decode(const DecodeRequest& req, Btf& out) const {
+  BTFC_ASSIGN_OR_RETURN(ResolvedRequest rr, resolve_request(m_desc, req));
+  BTFC_ASSIGN_OR_RETURN(out, Btf::create(rr.desc));
+  const Index nl = Index(rr.lights.size()), nv = Index(rr.views.size());
+  const Index w = rr.desc.width, n = Index(rr.desc.num_texels()), m = Index(rr.desc.abrdf_size());
+  const int nc = m_desc.channels;
+  // Gather the U rows of the requested directions, in the output's row order.
+  const int nblocks = int(m_blocks.size());
+  std::vector<MatrixXfR> Usub(nblocks);
+  const Index rows_per_block = m_cfg.dfmf ? nl * nv : m;
+  for (int k = 0; k < nblocks; ++k) {
+    Usub[k].resize(rows_per_block, m_blocks[k].U.cols());
+    for (Index v = 0; v < nv; ++v)
+      for (Index l = 0; l < nl; ++l) {
+        if (m_cfg.dfmf) {
+          Usub[k].row(l + nl * v) = m_blocks[k].U.row(rr.lights[l] + Index(m_desc.num_lights()) * rr.views[v]);
+        } else {
+          for (int c = 0; c < nc; ++c)
+            Usub[k].row(c + nc * (l + nl * v)) = m_blocks[k].U.row(Index(m_desc.row(rr.lights[l], rr.views[v], c)));
+        }
+      }
+  }
+  // Texel blocks bound the temporary memory; each block is one GEMM per factorized channel.
+  const Index tb = 4096;
+  for (Index t0 = 0; t0 < n; t0 += tb) {
+    const Index nb = std::min(tb, n - t0);
+    std::vector<MatrixXfR> sx(nblocks);
+    for (int k = 0; k < nblocks; ++k) {
+      sx[k].resize(nb, m_blocks[k].SxV.cols());
+      for (Index i = 0; i < nb; ++i) {
+        const Index t = t0 + i, sx_t = (rr.x0 + t % w) + Index(m_desc.width) * (rr.y0 + t / w);
+        sx[k].row(i) = m_blocks[k].SxV.row(sx_t);
+      }
+    }
+    Eigen::Map<MatrixXfR> dst(out.data() + size_t(t0) * size_t(m), nb, m);
+    if (!m_cfg.dfmf) {
+      dst.noalias() = sx[0] * Usub[0].transpose();
+      continue;
+    }
+    MatrixXfR ch[3];
+    for (int k = 0; k < 3; ++k) ch[k].noalias() = sx[k] * Usub[k].transpose();
+#pragma omp parallel for schedule(static)
+    for (Index i = 0; i < nb; ++i)
+      for (Index r = 0; r < rows_per_block; ++r) {
+        const float in[3] = {ch[0](i, r), ch[1](i, r), ch[2](i, r)};
+        undecorrelate(in, &dst(i, 3 * r));
+      }
+  }
+  return {};
+}
+
+Status FmfModel::save(ContainerWriter& w) const {
+  for (const Block& b : m_blocks) {
+    const uint64_t rows = uint64_t(b.U.rows()), cols = uint64_t(b.U.cols()), texels = uint64_t(b.SxV.rows());
+    MatrixXfR sxv_scaled = b.SxV * b.scale.cwiseInverse().asDiagonal();
+    auto put = [&](const std::string& name, const MatrixXfR& M, std::vector<uint64_t> shape) {
+      if (!m_cfg.half) {
+        w.add_tensor(Tensor::from_f32(name, std::move(shape), M.data()));
+        return;
+      }
+      Tensor t;
+      t.name = name;
+      t.dtype = DType::f16;
+      t.shape = std::move(shape);
+      t.bytes.resize(size_t(M.size()) * 2);
+      for (Index i = 0; i < M.size(); ++i) {
+        uint16_t bits = Imath::half(M.data()[i]).bits();
+        t.bytes[2 * i] = uint8_t(bits & 0xff);
+        t.bytes[2 * i + 1] = uint8_t(bits >> 8);
+      }
+      w.add_tensor(std::move(t));
+    };
+    put("U." + b.name, b.U, {rows, cols});
+    put("SxV." + b.name, sxv_scaled, {texels, cols});
+    w.add_tensor(Tensor::from_f32("scale." + b.name, {cols}, b.scale.data()));
+    w.add_tensor(Tensor::from_f32("S." + b.name, {cols}, b.S.data()));
+  }
+  return {};
+}
+
+// Rounds U and SxV to their storage precision, so the in-memory model is what the file holds.
+void quantize(Block& b, bool half) {
+  b.scale.resize(b.SxV.cols());
+  for (Index c = 0; c < b.SxV.cols(); ++c) {
+    const float mx = b.SxV.col(c).cwiseAbs().maxCoeff();
+    b.scale(c) = (half && mx > 0 && std::isfinite(mx)) ? mx : 1.0f;
+  }
+  if (!half) return;
+  auto round_half = [](float x) { return float(Imath::half(x)); };
+  b.U = b.U.unaryExpr(round_half);
+  for (Index c = 0; c < b.SxV.cols(); ++c) {
+    const float s = b.scale(c);
+    b.SxV.col(c) = b.SxV.col(c).unaryExpr([&](float x) { return round_half(x / s) * s; });
+  }
+}
+
+class FmfCodec final : public Codec {
+ public:
+  const char* name() const override { return "fmf"; }
+  const char* summary() const override { return "full matrix factorization (truncated SVD), seed 000 section 4"; }
+  uint32_t payload_version() const override { return k_payload_version; }
+  std::span<const ParamSpec> params() const override { return k_params; }
+
+  Result<std::unique_ptr<Model>> encode(const Btf& btf, const Params& p, Context& ctx) const override {
+    const BtfDesc& d = btf.desc();
+    const Config cfg = config_from(p);
+    if (cfg.dfmf && d.channels != 3) return invalid_argument("fmf: color=dfmf needs 3 channels, the BTF has " + std::to_string(d.channels));
+    BTFC_RETURN_IF_ERROR(btf.check_finite("fmf input"));
+    const auto t0 = std::chrono::steady_clock::now();
+    fmf::SvdOptions opt;
+    opt.target_rel_error = p.get_real("target_error");
+    opt.oversample = int(p.get_int("oversample"));
+    opt.power_iters = int(p.get_int("power_iters"));
+    opt.seed = ctx.seed;
+    opt.progress = ctx.progress;
+    const std::string m = p.get("svd");
+    opt.method = m == "exact" ? fmf::SvdMethod::exact : m == "randomized" ? fmf::SvdMethod::randomized : fmf::SvdMethod::automatic;
+    const int rank = int(p.get_int("rank")), chroma = int(p.get_int("chroma_rank"));
+
+    std::vector<Block> blocks;
+    ModelStats stats;
+    auto factor = [&](const std::string& name, const float* B, size_t rows, int max_rank) -> Status {
+      opt.max_rank = max_rank;
+      BTFC_ASSIGN_OR_RETURN(fmf::SvdResult r, fmf::truncated_svd(B, rows, d.num_texels(), opt));
+      Block b{name, std::move(r.U), std::move(r.SxV), r.S.cast<float>(), {}};
+      quantize(b, cfg.half);
+      const int kept = int(b.U.cols());
+      stats.add("rank." + name, kept);
+      stats.add("rel_error." + name, r.rel_error_estimate());
+      stats.note("svd." + name, r.method);
+      if (kept < max_rank && opt.target_rel_error == 0)
+        stats.note("clamped." + name, "rank " + std::to_string(max_rank) + " clamped to " + std::to_string(kept) +
+                                          " (the data's numerical rank limit is " + std::to_string(r.data_rank_limit) + ")");
+      if (!r.target_reached)
+        stats.note("target." + name, "target_error not reached at the maximum rank " + std::to_string(max_rank));
+      blocks.push_back(std::move(b));
+      return {};
+    };
+    if (!cfg.dfmf) {
+      // The Btf buffer is B (rows = (view, light, colour), columns = texels), column-major.
+      BTFC_RETURN_IF_ERROR(factor("rgb", btf.data(), d.abrdf_size(), rank));
+    } else {
+      // One decorrelated channel matrix at a time keeps peak memory at input + 1/3 input.
+      const size_t rows = d.num_images(), n = d.num_texels();
+      std::vector<float> ch(rows * n);
+      size_t clamped = 0;
+      for (int k = 0; k < 3; ++k) {
+#pragma omp parallel for reduction(+ : clamped) schedule(static)
+        for (size_t t = 0; t < n; ++t) {
+          const float* a = btf.abrdf(t);
+          for (size_t r = 0; r < rows; ++r) {
+            const float* rgb = a + 3 * r;
+            float y = k_yuv.m[0][0] * rgb[0] + k_yuv.m[0][1] * rgb[1] + k_yuv.m[0][2] * rgb[2];
+            if (y < 0) y = 0, clamped += (k == 0);
+            float v = y;
+            if (k > 0) v = (k_yuv.m[k][0] * rgb[0] + k_yuv.m[k][1] * rgb[1] + k_yuv.m[k][2] * rgb[2]) / (y + k_drr_eps);
+            else v = std::log(y + k_drr_eps);
+            ch[t * rows + r] = v;
+          }
+        }
+        static const char* names[3] = {"y", "u", "v"};
+        BTFC_RETURN_IF_ERROR(factor(names[k], ch.data(), rows, k == 0 ? rank : (chroma ? chroma : rank)));
+      }
+      stats.add("negative_luminance_clamped", double(clamped));
+    }
+    stats.add("encode_seconds", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    auto model = std::make_unique<FmfModel>(d, p.canonical(), cfg, std::move(blocks));
+    model->mutable_stats() = std::move(stats);
+    return std::unique_ptr<Model>(std::move(model));
+  }
+
+  Result<std::unique_ptr<Model>> load(const ContainerReader& rd) const override {
+    if (rd.codec().payload_version > k_payload_version)
+      return unsupported(rd.path() + ": fmf payload version " + std::to_string(rd.codec().payload_version) +
+                         " is newer than this btfc supports (" + std::to_string(k_payload_version) + ")");
+    BTFC_ASSIGN_OR_RETURN(auto spec, parse_spec_string(rd.codec().spec));
+    BTFC_ASSIGN_OR_RETURN(Params p, bind_params(spec, k_params));
+    const Config cfg = config_from(p);
+    const BtfDesc& d = rd.desc();
+    if (cfg.dfmf && d.channels != 3) return corrupt_data(rd.path() + ": fmf color=dfmf with " + std::to_string(d.channels) + " channels");
+    const uint64_t rows = cfg.dfmf ? d.num_images() : d.abrdf_size(), texels = d.num_texels();
+    std::vector<Block> blocks;
+    const DType dt = cfg.half ? DType::f16 : DType::f32;
+    for (const char* name : cfg.dfmf ? std::vector<const char*>{"y", "u", "v"} : std::vector<const char*>{"rgb"}) {
+      const std::string b = name;
+      const TensorInfo* ti = rd.find("U." + b);
+      if (!ti || ti->shape.size() != 2) return corrupt_data(rd.path() + ": fmf tensor 'U." + b + "' missing or not 2-D");
+      const uint64_t C = ti->shape[1];
+      if (C == 0 || C > 4096) return corrupt_data(rd.path() + ": fmf tensor 'U." + b + "' has " + std::to_string(C) + " components");
+      BTFC_ASSIGN_OR_RETURN(Tensor U, rd.read_checked("U." + b, dt, {rows, C}));
+      BTFC_ASSIGN_OR_RETURN(Tensor SxV, rd.read_checked("SxV." + b, dt, {texels, C}));
+      BTFC_ASSIGN_OR_RETURN(Tensor scale, rd.read_checked("scale." + b, DType::f32, {C}));
+      BTFC_ASSIGN_OR_RETURN(Tensor S, rd.read_checked("S." + b, DType::f32, {C}));
+      BTFC_ASSIGN_OR_RETURN(std::vector<float> u, U.to_f32());
+      BTFC_ASSIGN_OR_RETURN(std::vector<float> sxv, SxV.to_f32());
+      BTFC_ASSIGN_OR_RETURN(std::vector<float> sc, scale.to_f32());
+      BTFC_ASSIGN_OR_RETURN(std::vector<float> s, S.to_f32());
+      Block blk;
+      blk.name = b;
+      blk.U = Eigen::Map<MatrixXfR>(u.data(), Index(rows), Index(C));
+      blk.SxV = Eigen::Map<MatrixXfR>(sxv.data(), Index(texels), Index(C));
+      blk.scale = Eigen::Map<Eigen::VectorXf>(sc.data(), Index(C));
+      blk.S = Eigen::Map<Eigen::VectorXf>(s.data(), Index(C));
+      for (Index c = 0; c < Index(C); ++c) {
+        if (!std::isfinite(blk.scale(c)) || blk.scale(c) <= 0) return corrupt_data(rd.path() + ": fmf tensor 'scale." + b + "' holds a non-positive or non-finite scale");
+      }
+      if (!blk.U.allFinite() || !blk.SxV.allFinite()) return corrupt_data(rd.path() + ": fmf block '" + b + "' holds non-finite values");
+      blk.SxV = blk.SxV * blk.scale.asDiagonal();
+      blocks.push_back(std::move(blk));
+    }
+    auto model = std::make_unique<FmfModel>(d, p.canonical(), cfg, std::move(blocks));
+    for (const Block& b : model->blocks()) model->mutable_stats().add("rank." + b.name, double(b.U.cols()));
+    return std::unique_ptr<Model>(std::move(model));
+  }
+};
+
+}  // namespace
+
+const Codec& fmf_codec() {
+  static const FmfCodec codec;
+  return codec;
+}
+
+}  // namespace btfc

@@ -1,0 +1,59 @@
+// Truncated SVD of a column-major float matrix B (m rows x n columns), for the fmf codec.
+//
+// Two paths:
+//  - exact: eigen-decomposition, in double, of the smaller Gram matrix (B B^T when m <= n, else
+//    B^T B). The kept components are then exactly the top singular triplets up to double
+//    round-off, so the rank-C error equals the Eckart-Young optimum sum_{i>C} sigma_i^2.
+//    Cost min(m,n)^2 max(m,n): right for matrices with one small side (one view, few texels).
+//  - randomized (Halko, Martinsson, Tropp 2011, Alg. 4.4 with re-orthonormalised power
+//    iterations): sketch Y = B Omega with l = C + oversample Gaussian columns, q power
+//    iterations, Q = orth(Y), then the small SVD of Q^T B. Each pass over B is one float GEMM
+//    through Eigen (multi-threaded); B is never copied. 2q + 2 passes in all.
+//
+// Output: U (m x C, orthonormal columns) and SxV = B^T U (n x C, the right singular vectors
+// already multiplied by the singular values, seed 000 section 4: V := V Sigma), so that
+// B ~ U SxV^T is the orthogonal projection of B onto span(U). Components whose singular value
+// is below 1e-6 * sigma_max (float noise) are dropped and the clamp is reported; at least one
+// component is always kept so shapes stay non-empty (all-zero input -> one zero component).
+#pragma once
+#include <Eigen/Core>
+#include <cstdint>
+#include <string>
+
+#include "core/progress.h"
+#include "core/status.h"
+
+namespace btfc::fmf {
+
+enum class SvdMethod { automatic, exact, randomized };
+
+struct SvdOptions {
+  int max_rank = 32;
+  double target_rel_error = 0;  // > 0: smallest rank <= max_rank with ||B - B'||/||B|| <= target
+  SvdMethod method = SvdMethod::automatic;
+  int oversample = 16;
+  int power_iters = 4;
+  uint64_t seed = 1;
+  Progress* progress = nullptr;
+};
+
+using MatrixXfR = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+struct SvdResult {
+  MatrixXfR U;              // m x C, row-major: one (light, view, colour) row's components contiguous
+  MatrixXfR SxV;            // n x C, row-major: one texel's components contiguous
+  Eigen::VectorXd S;        // C singular values, descending
+  double total_energy = 0;  // ||B||_F^2
+  double kept_energy = 0;   // sum of kept sigma^2
+  std::string method;       // "exact" or "randomized"
+  int requested_rank = 0;
+  int data_rank_limit = 0;  // min(m, n, numerical rank seen)
+  bool target_reached = true;
+  // Estimated relative Frobenius error sqrt(max(0, total - kept) / total).
+  double rel_error_estimate() const;
+};
+
+// B is column-major with leading dimension m. Fails on m == 0 or n == 0.
+Result<SvdResult> truncated_svd(const float* B, size_t m, size_t n, const SvdOptions& opt);
+
+}  // namespace btfc::fmf

@@ -1,0 +1,144 @@
+// The .btfc container: versioned, chunked, checksummed (docs/FORMAT.md is the byte-level spec).
+//
+// A file is a 32-byte header then chunks {u32 fourcc, u32 flags, u64 size, 12 reserved bytes,
+// u32 crc32; payload zero-padded to 16 bytes} until an "END " chunk. CRC32 is zlib's crc32 of the
+// chunk header's first 28 bytes followed by the payload (so a flipped type byte is caught too).
+// Chunks: DESC (the BtfDesc), CODC (codec name, codec payload version, exact spec string, btfc
+// version), TNSR (one named tensor each, data 16-byte aligned), STAT (encode statistics as text,
+// non-critical), END.
+//
+// Contracts:
+//  - ContainerWriter::write writes to "<path>.tmp-<pid>" and renames on success; on failure no
+//    file is left at `path` or at the temporary name.
+//  - ContainerReader::open checks the magic, version, every chunk header, and every size against
+//    the file length *before* allocating anything; a missing END, a truncated file, a bad CRC,
+//    an unknown critical chunk or inconsistent tensor dims (dims x dtype != payload size) are
+//    errors naming the file and the chunk. Small chunks (DESC, CODC, STAT) are read and verified
+//    at open; tensor payloads are read (and their CRC verified) on demand, so a multi-GB raw BTF
+//    streams into its destination buffer without a second copy.
+//  - Not thread-safe; one reader per thread.
+#pragma once
+#include <cstdint>
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/btf.h"
+#include "core/status.h"
+
+namespace btfc {
+
+enum class DType : uint8_t { f32 = 1, f16 = 2, u8 = 3, u16 = 4, u32 = 5, i32 = 6, f64 = 7 };
+size_t dtype_size(DType t);
+const char* dtype_name(DType t);
+
+// A named, typed, shaped array. `bytes` holds the raw little-endian payload.
+struct Tensor {
+  std::string name;
+  DType dtype = DType::f32;
+  std::vector<uint64_t> shape;
+  std::vector<uint8_t> bytes;
+
+  uint64_t count() const;  // product of shape
+  static Tensor from_f32(std::string name, std::vector<uint64_t> shape, const float* data);
+  static Tensor from_u32(std::string name, std::vector<uint64_t> shape, const uint32_t* data);
+  // Converts f32 / f16 / f64 payloads to float; errors for integer dtypes.
+  Result<std::vector<float>> to_f32() const;
+};
+
+struct CodecInfo {
+  std::string name;           // "fmf"; "raw" for an uncompressed BTF
+  uint32_t payload_version = 0;
+  std::string spec;           // exact canonical spec string
+  std::string btfc_version;   // of the writer
+};
+
+class ContainerWriter {
+ public:
+  void set_desc(const BtfDesc& desc) { m_desc = desc; }
+  void set_codec(const CodecInfo& info) { m_codec = info; }
+  void add_tensor(Tensor t) { m_tensors.push_back(std::move(t)); }
+  // A float tensor written straight from caller memory (no copy), e.g. a raw BTF's data.
+  // The pointer must stay valid until write() returns.
+  void add_tensor_view(std::string name, DType dtype, std::vector<uint64_t> shape, const void* data);
+  void set_stats(std::string text) { m_stats = std::move(text); }
+  Status write(const std::string& path) const;
+  // Total bytes write() would produce.
+  uint64_t file_size() const;
+
+ private:
+  struct View {
+    std::string name;
+    DType dtype;
+    std::vector<uint64_t> shape;
+    const void* data;
+  };
+  BtfDesc m_desc;
+  CodecInfo m_codec;
+  std::vector<Tensor> m_tensors;
+  std::vector<View> m_views;
+  std::string m_stats;
+};
+
+struct TensorInfo {
+  std::string name;
+  DType dtype;
+  std::vector<uint64_t> shape;
+  uint64_t offset;   // payload offset in the file
+  uint64_t size;     // payload bytes
+  uint32_t crc;
+};
+
+struct ChunkInfo {
+  std::string type;  // fourcc
+  uint32_t flags;
+  uint64_t offset, size;
+};
+
+class ContainerReader {
+ public:
+  static Result<ContainerReader> open(const std::string& path);
+  ContainerReader(ContainerReader&&) noexcept;
+  ContainerReader& operator=(ContainerReader&&) noexcept;
+  ~ContainerReader();
+
+  const std::string& path() const { return m_path; }
+  const BtfDesc& desc() const { return m_desc; }
+  const CodecInfo& codec() const { return m_codec; }
+  const std::string& stats() const { return m_stats; }
+  const std::vector<TensorInfo>& tensors() const { return m_tensors; }
+  const std::vector<ChunkInfo>& chunks() const { return m_chunks; }
+  uint64_t file_size() const { return m_file_size; }
+  const TensorInfo* find(const std::string& name) const;
+
+  // Reads one tensor, verifying its CRC. Errors name the file and the tensor.
+  Result<Tensor> read(const std::string& name) const;
+  // Reads a tensor and checks its dtype and shape (an empty `shape` accepts any shape).
+  Result<Tensor> read_checked(const std::string& name, DType dtype, const std::vector<uint64_t>& shape) const;
+  // Streams a tensor's payload into dst (dst_bytes must equal its size), verifying the CRC.
+  Status read_into(const std::string& name, void* dst, uint64_t dst_bytes) const;
+  // Reads every tensor payload and checks its CRC (btfc info --verify).
+  Status verify_all() const;
+
+ private:
+  ContainerReader() = default;
+  std::string m_path;
+  std::FILE* m_file = nullptr;
+  uint64_t m_file_size = 0;
+  BtfDesc m_desc;
+  CodecInfo m_codec;
+  std::string m_stats;
+  std::vector<TensorInfo> m_tensors;
+  std::vector<ChunkInfo> m_chunks;
+};
+
+// Uncompressed BTFs use the same container with codec name "raw" and one f32 tensor "data"
+// of shape [num_texels, abrdf_size] in the layout of core/btf.h.
+Status save_raw_btf(const Btf& btf, const std::string& path);
+Result<Btf> load_raw_btf(const ContainerReader& reader);
+
+// Version string of this build, stored in CODC.
+const char* btfc_version();
+
+}  // namespace btfc

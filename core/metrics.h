@@ -1,0 +1,33 @@
+// Error metrics between a reference BTF and a reconstruction of the same shape.
+//
+// RMSE over all values; relative L2 = ||a - b||_F / ||a||_F; PSNR = 20 log10(peak / RMSE) where
+// peak = 1 for LDR data (values in [0, 1] from 8-bit sources) and, for HDR data (desc.hdr or any
+// reference value > 1), peak = the maximum reference value (the "peak" field says which was used).
+// SSIM: Wang et al. 2004 on luminance Y = 0.2126 R + 0.7152 G + 0.0722 B (first channel when
+// channels != 3), 11x11 Gaussian window sigma 1.5, K1 = 0.01, K2 = 0.03, dynamic range L = peak,
+// mean over the positions where the window lies fully inside the image (identical to
+// scikit-image's structural_similarity(gaussian_weights=True, sigma=1.5,
+// use_sample_covariance=False, data_range=L), which crops the same border); images smaller than
+// 11 x 11 use a window clipped to the image. mean_ssim is the mean over all (light, view) images.
+#pragma once
+#include <string>
+
+#include "core/btf.h"
+
+namespace btfc {
+
+struct Metrics {
+  double rmse = 0;
+  double rel_l2 = 0;
+  double psnr = 0;       // dB; +inf when identical
+  double peak = 1;       // the peak used for PSNR and SSIM
+  double mean_ssim = 1;  // over all images
+  double max_abs = 0;
+};
+
+Result<Metrics> compare_btf(const Btf& reference, const Btf& test, bool with_ssim = true);
+
+// SSIM of two single-channel images (row-major, w x h) with dynamic range L.
+double ssim_gray(const float* a, const float* b, int w, int h, double L);
+
+}  // namespace btfc

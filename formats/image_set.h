@@ -1,0 +1,41 @@
+// Image-set BTFs (formats.md 2.1 / 2.3): one image per (light, view).
+//
+//   UBO2003: <dir>/tvTTT_pvPPP/NNNNN tlTTT plPPP tvTTT pvPPP.jpg   (8-bit sRGB JPEG)
+//   UTIA:    <dir>/tvTTT_pvPPP/tlTTT_plPPP_tvTTT_pvPPP.png|.exr   (PNG sRGB 8-bit, EXR linear)
+// Angles are whole degrees parsed from the *end* of each name (tl/pl/tv/pv), not the prefix.
+// `dir` may also be a single view folder (tvTTT_pvPPP) itself.
+//
+// Contracts:
+//  - 8-bit images are sRGB-decoded to linear float; EXR/HDR values are kept linear (desc.hdr).
+//  - Partial sets are accepted: the light set is the sorted union of lights seen, the view set
+//    the union of views; every (light, view) pair of that product must have exactly one image,
+//    otherwise the error names the first missing pair. Sets equal to the UBO2003 81 sampling get
+//    its index order (ring, then phi) and name.
+//  - All images must have the same size and >= 3 channels (the first 3 are used); a mismatch, an
+//    unreadable image, or a non-finite pixel is an error naming the file.
+//  - The writer writes the UTIA layout (EXR linear half/float, or PNG 8-bit sRGB) to a temp
+//    directory renamed on success.
+#pragma once
+#include <string>
+#include <vector>
+
+#include "core/btf.h"
+
+namespace btfc {
+
+struct ImageName {
+  int tl = 0, pl = 0, tv = 0, pv = 0;  // degrees
+};
+// Parses the four angles from the end of a file name ("00081 tl015 pl000 tv000 pv000.jpg" or
+// "tl015_pl000_tv000_pv000.exr"). Fails on names of another shape; angles must be < 360.
+Result<ImageName> parse_image_name(const std::string& filename);
+
+// Cheap check: does `path` look like an image-set directory?
+bool is_image_set(const std::string& path);
+
+Result<Btf> read_image_set(const std::string& path);
+
+enum class ImageFormat { exr, png };
+Status write_image_set(const Btf& btf, const std::string& dir, ImageFormat format);
+
+}  // namespace btfc

@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# The main job on an embedded default: synthesize a demo BTF, compress it with every registered
+# codec, decode, compare, and print one table row per codec; then the same on the real measured
+# slice in ../shared/data when it is present.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+scripts/setup.sh
+scripts/build.sh >/dev/null
+BTFC=${BTFC_BUILD_DIR:-build}/btfc
+WORK=$(mktemp -d /tmp/btfc-demo.XXXXXX)
+trap 'rm -rf "$WORK"' EXIT
+
+echo "== synthetic BTF: 64x64 texels, 81 x 81 UBO2003 directions"
+"$BTFC" synth --width 64 --height 64 --seed 7 -o "$WORK/demo.btfc"
+specs=()
+for c in $("$BTFC" codecs --names); do specs+=(-c "$c"); done
+"$BTFC" bench "$WORK/demo.btfc" --label synthetic-64 "${specs[@]}"
+
+REAL=../shared/data/ubo2003_tv000_pv000_81lights
+if [ -d "$REAL" ]; then
+  echo
+  echo "== real measured slice: $REAL (1 view x 81 lights, 256x256)"
+  "$BTFC" bench "$REAL" --label ubo2003-slice "${specs[@]}"
+fi
+echo
+echo "ratio = float32 size / model payload; PSNR peak 1 for LDR data, the data maximum for HDR"

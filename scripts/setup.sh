@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# Installs the Debian packages btfc needs. Idempotent: does nothing when all are present.
+# Package list: ../shared/spec/toolchain.md section 1 (+ nlohmann-json, scikit-image for the
+# SSIM reference script, GoogleTest / Google Benchmark).
+set -euo pipefail
+PACKAGES=(
+  build-essential cmake
+  libeigen3-dev libopenexr-dev libopenimageio-dev openimageio-tools
+  pocl-opencl-icd ocl-icd-opencl-dev opencl-headers opencl-clhpp-headers clinfo
+  libceres-dev zlib1g-dev libcli11-dev nlohmann-json3-dev
+  libgtest-dev libgmock-dev libbenchmark-dev
+  python3-numpy python3-skimage
+)
+missing=()
+for p in "${PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -eq 0 ]; then
+  exit 0
+fi
+echo "setup: installing ${missing[*]}" >&2
+SUDO=""
+[ "$(id -u)" -ne 0 ] && SUDO="sudo"
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -qq
+$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null

@@ -1,0 +1,78 @@
+#!/usr/bin/env bash
+# CLI round trip through the real binary: synth -> compress -> info -> decompress -> compare,
+# eval, plus the exit codes and "no partial output" rules for bad input.
+# Usage: BTFC=path/to/btfc cli_test.sh WORKDIR
+set -uo pipefail
+W=$1
+rm -rf "$W" && mkdir -p "$W"
+fails=0
+check() { # check NAME EXPECTED_EXIT CMD...
+  local name=$1 want=$2; shift 2
+  "$@" >"$W/out.txt" 2>"$W/err.txt"
+  local got=$?
+  if [ "$got" -ne "$want" ]; then
+    echo "FAIL $name: exit $got, wanted $want"; cat "$W/out.txt" "$W/err.txt"; fails=$((fails + 1))
+  else
+    echo "ok   $name"
+  fi
+}
+expect_grep() { # expect_grep NAME PATTERN FILE
+  if ! grep -q -- "$2" "$3"; then echo "FAIL $1: '$2' not in $3:"; cat "$3"; fails=$((fails + 1)); else echo "ok   $1"; fi
+}
+
+check synth 0 "$BTFC" synth --width 12 --height 10 --seed 3 -o "$W/s.btfc"
+check compress 0 "$BTFC" compress "$W/s.btfc" -c fmf:rank=12 -o "$W/m.btfc"
+check info 0 "$BTFC" info --verify "$W/m.btfc"
+expect_grep info-spec "fmf:rank=12" "$W/out.txt"
+expect_grep info-desc "12x10 texels, 81 lights (ubo2003) x 81 views (ubo2003)" "$W/out.txt"
+check info-json 0 "$BTFC" --json info "$W/m.btfc"
+expect_grep info-json-codec '"codec": "fmf"' "$W/out.txt"
+check decompress 0 "$BTFC" decompress "$W/m.btfc" -o "$W/d.btfc"
+check compare 0 "$BTFC" --json compare "$W/s.btfc" "$W/d.btfc"
+# rank 12 of a 12x10 synthetic BTF: relative error must be small but not zero.
+python3 - "$W/out.txt" <<'PY' || fails=$((fails + 1))
+import json, sys
+m = json.load(open(sys.argv[1]))
+assert 1e-5 < m["rel_l2"] < 0.2, m
+assert 0.5 < m["mean_ssim"] <= 1.0, m
+print("ok   compare-values", m["rel_l2"], m["mean_ssim"])
+PY
+check compare-model 0 "$BTFC" compare "$W/s.btfc" "$W/m.btfc"
+check decompress-region 0 "$BTFC" decompress "$W/m.btfc" -o "$W/r.btfc" --region 2,3,4,5 --lights 0,5 --views 7
+check info-region 0 "$BTFC" info "$W/r.btfc"
+expect_grep region-desc "4x5 texels, 2 lights (custom) x 1 views (custom)" "$W/out.txt"
+check eval-measured 0 "$BTFC" eval "$W/m.btfc" --texel 3,4 --light 5 --view 7
+check eval-dir 0 "$BTFC" eval "$W/m.btfc" --texel 3,4 --wl 20,30 --wv 40,100
+check decompress-images 0 "$BTFC" decompress "$W/m.btfc" -o "$W/imgs" --lights 0,1 --views 0
+test -f "$W/imgs/tv000_pv000/tl015_pl000_tv000_pv000.exr" && echo "ok   image-set-written" || { echo "FAIL image-set-written"; fails=$((fails + 1)); }
+check compare-imageset 0 "$BTFC" compare "$W/imgs" "$W/imgs"
+
+# Usage errors: exit 1, nothing written.
+check unknown-param 1 "$BTFC" compress "$W/s.btfc" -c fmf:rnak=3 -o "$W/bad.btfc"
+expect_grep unknown-param-msg "unknown parameter 'rnak'" "$W/err.txt"
+check out-of-range 1 "$BTFC" compress "$W/s.btfc" -c fmf:rank=0 -o "$W/bad.btfc"
+check unknown-codec 1 "$BTFC" compress "$W/s.btfc" -c nope -o "$W/bad.btfc"
+check eval-outside 1 "$BTFC" eval "$W/m.btfc" --texel 99,0 --light 0 --view 0
+check no-subcommand 1 "$BTFC"
+# I/O and format errors: exit 2, the message names the file.
+check missing-input 2 "$BTFC" compress "$W/nope.btfc" -c fmf -o "$W/bad.btfc"
+expect_grep missing-msg "nope.btfc" "$W/err.txt"
+head -c 100 "$W/m.btfc" > "$W/trunc.btfc"
+check truncated 2 "$BTFC" info "$W/trunc.btfc"
+expect_grep truncated-msg "trunc.btfc" "$W/err.txt"
+printf 'NOTABTFC at all, just text' > "$W/magic.btfc"
+check wrong-magic 2 "$BTFC" decompress "$W/magic.btfc" -o "$W/bad.btfc"
+test ! -e "$W/bad.btfc" && echo "ok   no-partial-output" || { echo "FAIL no-partial-output"; fails=$((fails + 1)); }
+ls "$W" | grep -q tmp- && { echo "FAIL temp files left"; fails=$((fails + 1)); } || echo "ok   no-temp-files"
+
+# The real measured slice, when present: read, compress, compare.
+if [ -d "${DATA_DIR:-}/ubo2003_tv000_pv000_81lights" ]; then
+  check real-info 0 "$BTFC" info "$DATA_DIR/ubo2003_tv000_pv000_81lights"
+  expect_grep real-desc "256x256 texels, 81 lights (ubo2003) x 1 views" "$W/out.txt"
+  check real-compress 0 "$BTFC" compress "$DATA_DIR/ubo2003_tv000_pv000_81lights" -c fmf:rank=16 -o "$W/real.btfc"
+  check real-compare 0 "$BTFC" --json compare "$DATA_DIR/ubo2003_tv000_pv000_81lights" "$W/real.btfc"
+  python3 -c "import json,sys; m=json.load(open(sys.argv[1])); assert 0.005 < m['rel_l2'] < 0.2 and m['mean_ssim'] > 0.8, m; print('ok   real-values', m)" "$W/out.txt" || fails=$((fails + 1))
+fi
+
+echo "$fails failure(s)"
+[ "$fails" -eq 0 ]
