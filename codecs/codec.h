@@ -31,6 +31,7 @@ struct Context {
 struct DecodeRequest {
   int x0 = 0, y0 = 0, width = -1, height = -1;  // -1 = to the edge
   std::vector<int> lights, views;
+  double lod = 0;  // level of detail for codecs that have one (lpyr); 0 = full detail
 };
 
 // Named statistics, in insertion order, for `btfc info` / `--json`.
@@ -54,6 +55,17 @@ class Model {
   virtual void eval(int x, int y, int light, int view, float* out) const = 0;
   // Value at arbitrary directions, interpolated between measured ones (9 lookups).
   virtual Status eval_dir(int x, int y, const Vec3& wl, const Vec3& wv, float* out) const = 0;
+
+  // Value at a continuous level of detail (0 = full detail). Codecs without levels of detail
+  // answer unsupported for lod != 0.
+  virtual Status eval_lod(int x, int y, int light, int view, double lod, float* out) const {
+    if (lod != 0) return unsupported(spec() + ": this codec has no levels of detail");
+    eval(x, y, light, view, out);
+    return {};
+  }
+  // The arrays a real-time renderer of this codec's paper reads (eigen-textures, weight maps,
+  // codebooks, index maps...), named and shaped; exporters lay them out as GPU textures.
+  virtual Result<std::vector<Tensor>> gpu_tensors() const { return std::vector<Tensor>{}; }
 
   // Writes the model's tensors (the container's DESC and CODC are written by the caller).
   virtual Status save(ContainerWriter& w) const = 0;
