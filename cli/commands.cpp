@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "codecs/codec.h"
+#include "core/cl_runtime.h"
 #include "core/container.h"
 #include "core/metrics.h"
 #include "core/synth.h"
@@ -87,6 +88,34 @@ void print_stats(const ModelStats& st, json* j) {
 }
 
 }  // namespace
+
+void set_device(const std::string& choice) {
+  auto c = ocl::parse_device_choice(choice);
+  if (c.ok()) ocl::set_device_choice(c.value());
+}
+
+int cmd_devices(const Global& g) {
+  auto devs = ocl::list_devices();
+  if (!devs.ok()) {
+    if (g.json) std::cout << json{{"devices", json::array()}, {"note", devs.status().message()}}.dump(2) << "\n";
+    else std::cout << "no OpenCL device: " << devs.status().message() << "\nbtfc runs its C++ reference path.\n";
+    return 0;
+  }
+  json j = json::array();
+  for (size_t i = 0; i < devs->size(); ++i) {
+    const ocl::DeviceInfo& d = (*devs)[i];
+    j.push_back({{"index", i}, {"platform", d.platform}, {"name", d.name}, {"type", d.type}, {"version", d.version},
+                 {"compute_units", d.compute_units}, {"global_mem", d.global_mem}, {"max_alloc", d.max_alloc}});
+    if (!g.json)
+      std::printf("%zu: %s [%s] %s, %s, %d compute units, %.2f GiB global, %.2f GiB max allocation\n", i, d.name.c_str(),
+                  d.type.c_str(), d.platform.c_str(), d.version.c_str(), d.compute_units, double(d.global_mem) / (1 << 30),
+                  double(d.max_alloc) / (1 << 30));
+  }
+  auto rt = ocl::Runtime::get();
+  if (g.json) std::cout << json{{"devices", j}, {"selected", rt.ok() ? rt.value()->info().name : ""}}.dump(2) << "\n";
+  else std::printf("selected: %s (BTFC_CL_DEVICE = index or name substring to change)\n", rt.ok() ? rt.value()->info().name.c_str() : rt.status().message().c_str());
+  return 0;
+}
 
 int cmd_codecs(const Global& g, bool names_only) {
   json j = json::array();

@@ -59,6 +59,10 @@ struct BenchArgs {
   unsigned long long seed = 1;
 };
 
+// Applies --device (auto | cpu | cl) to the process (core/cl_runtime.h).
+void set_device(const std::string& choice);
+
+int cmd_devices(const Global& g);
 int cmd_codecs(const Global& g, bool names_only);
 int cmd_synth(const Global& g, const SynthArgs& a);
 int cmd_info(const Global& g, const std::string& path, bool verify);

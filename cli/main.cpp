@@ -11,12 +11,19 @@ int main(int argc, char** argv) {
   Global g;
   app.add_flag("--json", g.json, "machine-readable JSON output on stdout");
   app.add_flag("-q,--quiet", g.quiet, "no progress bar or chatter");
+  std::string device = "auto";
+  app.add_option("--device", device, "where kernels run: cl (OpenCL, required), cpu (C++ reference), auto (OpenCL if it works)")
+      ->check(CLI::IsMember({"auto", "cpu", "cl"}));
+  app.parse_complete_callback([&] { set_device(device); });
   int code = 0;
 
   bool names_only = false;
   auto* codecs = app.add_subcommand("codecs", "list the registered codecs and their parameters");
   codecs->add_flag("--names", names_only, "only the names, one per line");
   codecs->callback([&] { code = cmd_codecs(g, names_only); });
+
+  auto* devices = app.add_subcommand("devices", "list the OpenCL devices btfc can use");
+  devices->callback([&] { code = cmd_devices(g); });
 
   SynthArgs sy;
   auto* synth = app.add_subcommand("synth", "write a deterministic synthetic BTF (height field, shadows, spatially varying material)");

@@ -43,6 +43,22 @@ Result<std::unique_ptr<Model>> load_model(const ContainerReader& reader) {
   return codec->load(reader);
 }
 
+Status Model::eval_batch(std::span<const EvalQuery> q, float* out) const {
+  const BtfDesc& d = desc();
+  const size_t nc = size_t(d.channels);
+  for (const EvalQuery& e : q)  // validate first, so the parallel loop cannot fail
+    if (e.x < 0 || e.y < 0 || e.x >= d.width || e.y >= d.height || (e.light >= 0) != (e.view >= 0) ||
+        (e.light >= 0 && (size_t(e.light) >= d.num_lights() || size_t(e.view) >= d.num_views())))
+      return invalid_argument("eval query (" + std::to_string(e.x) + ", " + std::to_string(e.y) + ", light " +
+                              std::to_string(e.light) + ", view " + std::to_string(e.view) + ") is outside the BTF");
+#pragma omp parallel for schedule(static)
+  for (size_t i = 0; i < q.size(); ++i) {
+    if (q[i].light >= 0) eval(q[i].x, q[i].y, q[i].light, q[i].view, out + i * nc);
+    else (void)eval_dir(q[i].x, q[i].y, q[i].wl, q[i].wv, out + i * nc);
+  }
+  return {};
+}
+
 Result<ResolvedRequest> resolve_request(const BtfDesc& src, const DecodeRequest& req) {
   ResolvedRequest r;
   r.x0 = req.x0;

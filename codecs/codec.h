@@ -34,6 +34,13 @@ struct DecodeRequest {
   double lod = 0;  // level of detail for codecs that have one (lpyr); 0 = full detail
 };
 
+// One evaluation: a texel and either measured indices (light, view >= 0) or directions.
+struct EvalQuery {
+  int x = 0, y = 0;
+  int light = -1, view = -1;
+  Vec3 wl, wv;
+};
+
 // Named statistics, in insertion order, for `btfc info` / `--json`.
 struct ModelStats {
   std::vector<std::pair<std::string, double>> numbers;
@@ -56,6 +63,9 @@ class Model {
   // Value at arbitrary directions, interpolated between measured ones (9 lookups).
   virtual Status eval_dir(int x, int y, const Vec3& wl, const Vec3& wv, float* out) const = 0;
 
+  // Many evaluations (out: channels floats per query), the throughput path: the default loops
+  // over eval / eval_dir in parallel; codecs with an OpenCL kernel override it.
+  virtual Status eval_batch(std::span<const EvalQuery> q, float* out) const;
   // Value at a continuous level of detail (0 = full detail). Codecs without levels of detail
   // answer unsupported for lod != 0.
   virtual Status eval_lod(int x, int y, int light, int view, double lod, float* out) const {

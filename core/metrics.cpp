@@ -19,6 +19,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <vector>
 
@@ -28,12 +29,12 @@ namespace {
 constexpr double k_sigma = 1.5;
 constexpr int k_radius = 5;  // 11 x 11: scikit-image's int(3.5 * sigma + 0.5) for sigma 1.5
 constexpr double k_k1 = 0.01, k_k2 = 0.03;
-// Per-thread luminance buffer budget (two float images per batched image) and batch cap; 16
-// images with a 4-texel prefetch distance measured fastest on 128 x 128 x 81 x 81 (batches of
-// 32 or 64 were 10-20 % slower: their buffers no longer stay cached until ssim_gray reads them).
+// Per-thread luminance buffer budget (two float images per batched image), batch cap and
+// prefetch distance in texels. Measured on 256 x 256 x 81 x 81: batches of 16 to 128 images
+// cost about the same once the buffers are padded (see mean_ssim), larger ones only use memory.
 constexpr size_t k_batch_bytes = size_t(32) << 20;
-constexpr size_t k_max_batch = 16;
-constexpr size_t k_prefetch = 4;
+constexpr size_t k_max_batch = 64;
+constexpr size_t k_prefetch = 8;
 
 std::vector<double> gaussian_taps(int r) {
   std::vector<double> g(size_t(2 * r + 1));
@@ -43,31 +44,41 @@ std::vector<double> gaussian_taps(int r) {
   return g;
 }
 
-// The filter kernels work on V adjacent columns at once: the V x 5 sums are fixed-size local
-// arrays the compiler keeps in vector registers while it walks the taps (V = 1 for the tail).
+// The filters work on 8 adjacent columns at a time (then 1 for the tail), keeping the 8 x 5
+// sums in vector registers while walking the taps. The vertical pass uses GCC/Clang vector
+// types: written as a plain loop, GCC 12 spilled its sums to the stack (1.5x slower overall).
 constexpr int k_lanes = 8;
+typedef double v8d __attribute__((vector_size(64)));
+typedef float v8f __attribute__((vector_size(32)));
 struct Taps {
   const double* g;
   int n;
 };
 
-// Vertical pass for columns [x, x + V): moments of a, b, a^2, b^2, ab over rows [0, taps.n)
+// Vertical pass for columns [x, x + 8): moments of a, b, a^2, b^2, ab over rows [0, taps.n)
 // starting at ra / rb, written to the 5 maps of v (each w long).
-template <int V>
-inline void vertical(const float* ra, const float* rb, int w, int x, const Taps& t, double* v) {
-  double s[5][V] = {};
+inline void vertical8(const float* ra, const float* rb, int w, int x, const Taps& t, double* v) {
+  v8d s[5] = {};
   for (int k = 0; k < t.n; ++k) {
-    const double g = t.g[k];
-    const float* pa = ra + size_t(k) * size_t(w) + size_t(x);
-    const float* pb = rb + size_t(k) * size_t(w) + size_t(x);
-#pragma omp simd
-    for (int j = 0; j < V; ++j) {
-      const double p = pa[j], q = pb[j], gp = g * p, gq = g * q;
-      s[0][j] += gp, s[1][j] += gq, s[2][j] += gp * p, s[3][j] += gq * q, s[4][j] += gp * q;
-    }
+    v8f fa, fb;
+    std::memcpy(&fa, ra + size_t(k) * size_t(w) + size_t(x), sizeof fa);
+    std::memcpy(&fb, rb + size_t(k) * size_t(w) + size_t(x), sizeof fb);
+    const v8d p = __builtin_convertvector(fa, v8d), q = __builtin_convertvector(fb, v8d);
+    const v8d gp = t.g[k] * p, gq = t.g[k] * q;
+    s[0] += gp, s[1] += gq, s[2] += gp * p, s[3] += gq * q, s[4] += gp * q;
   }
-  for (int m = 0; m < 5; ++m)
-    for (int j = 0; j < V; ++j) v[size_t(m) * size_t(w) + size_t(x + j)] = s[m][j];
+  for (int m = 0; m < 5; ++m) std::memcpy(v + size_t(m) * size_t(w) + size_t(x), &s[m], sizeof s[m]);
+}
+
+// The same for the single column x.
+inline void vertical1(const float* ra, const float* rb, int w, int x, const Taps& t, double* v) {
+  double s[5] = {};
+  for (int k = 0; k < t.n; ++k) {
+    const double p = ra[size_t(k) * size_t(w) + size_t(x)], q = rb[size_t(k) * size_t(w) + size_t(x)];
+    const double gp = t.g[k] * p, gq = t.g[k] * q;
+    s[0] += gp, s[1] += gq, s[2] += gp * p, s[3] += gq * q, s[4] += gp * q;
+  }
+  for (int m = 0; m < 5; ++m) v[size_t(m) * size_t(w) + size_t(x)] = s[m];
 }
 
 // Horizontal pass for valid columns [x, x + V); adds their SSIM values to acc[0..V).
@@ -92,27 +103,26 @@ inline void horizontal_ssim(const double* v, int w, int x, const Taps& t, const 
   }
 }
 
-inline float luminance(const ImageView& im, int x, int y) {
-  if (im.channels != 3) return im.at(x, y, 0);
-  return float(0.2126 * im.at(x, y, 0) + 0.7152 * im.at(x, y, 1) + 0.0722 * im.at(x, y, 2));
-}
-
-// Luminance of the images `views[0..cnt)` of one BTF into out[k * n_tex + texel]. Each texel
-// lies in its own memory page, so the loads of one texel would wait for a TLB walk and a DRAM
-// fetch before the next texel's start: the batch's span of texel t + k_prefetch is prefetched.
-void extract_luminance(const ImageView* views, size_t cnt, float* out) {
-  const int w = views[0].width, h = views[0].height;
-  const size_t n_tex = size_t(w) * size_t(h), stride = views[0].texel_stride;
-  const float* lo = views[0].base;                                // the batch's first value
-  const float* hi = views[cnt - 1].base + views[cnt - 1].channels;  // one past its last
-  size_t t = 0;
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x, ++t) {
-      if (t + k_prefetch < n_tex)
-        for (const float* p = lo + (t + k_prefetch) * stride; p < hi + (t + k_prefetch) * stride; p += 16)
-          __builtin_prefetch(p);
-      for (size_t k = 0; k < cnt; ++k) out[k * n_tex + t] = luminance(views[k], x, y);
+// Luminance of `cnt` consecutive images of one BTF, from image `first` on (adjacent in each
+// ABRDF: btf.h's row order), into out[k * out_stride + texel]. Each texel lies in its own
+// memory page, so its loads would wait for a TLB walk and a DRAM fetch before the next texel's
+// could start: the batch's span of texel t + k_prefetch is prefetched.
+void extract_luminance(const ImageView& first, size_t cnt, float* out, size_t out_stride) {
+  const size_t n_tex = size_t(first.width) * size_t(first.height), stride = first.texel_stride;
+  const size_t C = size_t(first.channels), span = cnt * C;
+  float lum[k_max_batch];
+  for (size_t t = 0; t < n_tex; ++t) {
+    const float* p = first.base + t * stride;  // = &first.at(x, y, 0): texel t's image i0 + 0
+    if (t + k_prefetch < n_tex)
+      for (size_t o = 0; o < span; o += 16) __builtin_prefetch(p + k_prefetch * stride + o);
+    if (C == 3) {
+#pragma omp simd
+      for (size_t k = 0; k < cnt; ++k) lum[k] = float(0.2126 * p[3 * k] + 0.7152 * p[3 * k + 1] + 0.0722 * p[3 * k + 2]);
+    } else {
+      for (size_t k = 0; k < cnt; ++k) lum[k] = p[k * C];
     }
+    for (size_t k = 0; k < cnt; ++k) out[k * out_stride + t] = lum[k];
+  }
 }
 
 // Mean SSIM over all (light, view) images of two same-shape BTFs.
@@ -122,23 +132,21 @@ double mean_ssim(const Btf& ref, const Btf& test, double L) {
   // Consecutive image indices (l + n_lights * v) are adjacent within each texel's ABRDF, so
   // extracting a batch of them texel by texel uses whole cache lines and pays each texel's page
   // walk once per batch; one image at a time would fetch a 64-byte line per texel for 3 floats.
-  const size_t batch = std::clamp<size_t>(k_batch_bytes / (2 * sizeof(float) * n_tex), 1, k_max_batch);
+  // Images in the buffers are padded 16 floats apart: with a power-of-two image size (256 x 256)
+  // all of a texel's writes would land in one cache set (measured 1.5-2x slower at batch 64).
+  const size_t ps = n_tex + 16;
+  const size_t batch = std::clamp<size_t>(k_batch_bytes / (2 * sizeof(float) * ps), 1, k_max_batch);
   const long long n_batches = (long long)((n_img + batch - 1) / batch);
   std::vector<double> s(n_img);  // per image, summed serially: same result for any thread count
 #pragma omp parallel
   {
-    std::vector<float> ya(batch * n_tex), yb(batch * n_tex);
-    std::vector<ImageView> va(batch), vb(batch);
+    std::vector<float> ya(batch * ps), yb(batch * ps);
 #pragma omp for schedule(dynamic)
     for (long long bi = 0; bi < n_batches; ++bi) {
       const size_t i0 = size_t(bi) * batch, cnt = std::min(batch, n_img - i0);
-      for (size_t k = 0; k < cnt; ++k) {
-        va[k] = ref.image((i0 + k) % n_lights, (i0 + k) / n_lights);
-        vb[k] = test.image((i0 + k) % n_lights, (i0 + k) / n_lights);
-      }
-      extract_luminance(va.data(), cnt, ya.data());
-      extract_luminance(vb.data(), cnt, yb.data());
-      for (size_t k = 0; k < cnt; ++k) s[i0 + k] = ssim_gray(&ya[k * n_tex], &yb[k * n_tex], d.width, d.height, L);
+      extract_luminance(ref.image(i0 % n_lights, i0 / n_lights), cnt, ya.data(), ps);
+      extract_luminance(test.image(i0 % n_lights, i0 / n_lights), cnt, yb.data(), ps);
+      for (size_t k = 0; k < cnt; ++k) s[i0 + k] = ssim_gray(&ya[k * ps], &yb[k * ps], d.width, d.height, L);
     }
   }
   double sum = 0;
@@ -167,8 +175,8 @@ double ssim_gray(const float* a, const float* b, int w, int h, double L) {
     const float* ra = a + size_t(y) * size_t(w);
     const float* rb = b + size_t(y) * size_t(w);
     int x = 0;
-    for (; x + k_lanes <= w; x += k_lanes) vertical<k_lanes>(ra, rb, w, x, tyy, v.data());
-    for (; x < w; ++x) vertical<1>(ra, rb, w, x, tyy, v.data());
+    for (; x + k_lanes <= w; x += k_lanes) vertical8(ra, rb, w, x, tyy, v.data());
+    for (; x < w; ++x) vertical1(ra, rb, w, x, tyy, v.data());
     for (x = 0; x + k_lanes <= ow; x += k_lanes) horizontal_ssim<k_lanes>(v.data(), w, x, txx, c, acc);
     for (; x < ow; ++x) horizontal_ssim<1>(v.data(), w, x, txx, c, &tail);
   }
@@ -201,8 +209,9 @@ Result<Metrics> compare_btf(const Btf& reference, const Btf& test, bool with_ssi
       const double ra = pa[i], diff = ra - double(pb[i]);
       te += diff * diff;
       tr += ra * ra;
-      tm = std::max(tm, std::fabs(diff));
-      tx = std::max(tx, ra);
+      const double ad = std::fabs(diff);  // maxima as selects, which GCC vectorises
+      tm = ad > tm ? ad : tm;
+      tx = ra > tx ? ra : tx;
     }
     sq_err += te;
     sq_ref += tr;

@@ -246,9 +246,9 @@ double reference_mean_ssim(const Btf& a, const Btf& b, double L) {
 }
 
 TEST(Metrics, MeanSsimIsAverageOfImageSsims) {
-  // 35 images: more than one extraction batch, with a partial last batch.
+  // 9 x 8 = 72 images: more than one extraction batch (at most 64 images), the last partial.
   for (int channels : {3, 1, 2}) {
-    Btf a = make_btf(make_desc(13, 11, 5, 7, channels));
+    Btf a = make_btf(make_desc(13, 11, 9, 8, channels));
     Btf b = make_btf(a.desc());
     fill(a, 0.0);
     fill(b, 0.08);

@@ -6,7 +6,11 @@
 #include <chrono>
 #include <cmath>
 
+#include <mutex>
+
+#include "codecs/fmf/fmf_cl.h"
 #include "codecs/fmf/svd.h"
+#include "core/cl_runtime.h"
 #include "core/interp.h"
 
 namespace btfc {
@@ -108,6 +112,7 @@ class FmfModel final : public Model {
   }
 
   Status decode(const DecodeRequest& req, Btf& out) const override;
+  Status eval_batch(std::span<const EvalQuery> q, float* out) const override;
   Status save(ContainerWriter& w) const override;
   uint64_t payload_bytes() const override {
     uint64_t bytes = 0, scalar = m_cfg.half ? 2 : 4;
@@ -124,17 +129,96 @@ class FmfModel final : public Model {
       rgb[c] = k_rgb_from_yuv[c][0] * yuv[0] + k_rgb_from_yuv[c][1] * yuv[1] + k_rgb_from_yuv[c][2] * yuv[2];
   }
 
+  // The factors in the OpenCL kernels' layout (codecs/fmf/fmf_cl.h), uploaded on first use.
+  Result<std::shared_ptr<fmf_cl::DeviceFactors>> device_factors() const;
+  fmf_cl::PackedFactors packed() const;
+  Status decode_cl(const ResolvedRequest& rr, Btf& out) const;
+
   BtfDesc m_desc;
   std::string m_spec;
   Config m_cfg;
   std::vector<Block> m_blocks;
   DirectionInterpolator m_light_interp, m_view_interp;
   ModelStats m_stats;
+  mutable std::mutex m_cl_mutex;
+  mutable std::shared_ptr<fmf_cl::DeviceFactors> m_cl;
 };
+
+fmf_cl::PackedFactors FmfModel::packed() const {
+  fmf_cl::PackedFactors f;
+  f.mode = m_cfg.dfmf ? BTFC_FMF_DFMF : BTFC_FMF_RGB;
+  f.blocks = int(m_blocks.size());
+  for (const Block& b : m_blocks) f.C = std::max(f.C, int(b.U.cols()));
+  f.rows_per_block = int(m_blocks[0].U.rows());
+  f.texels = int(m_desc.num_texels());
+  f.nL = int(m_desc.num_lights());
+  f.nV = int(m_desc.num_views());
+  // Blocks with fewer components (dfmf chroma) are zero-padded to the common C.
+  f.U.assign(size_t(f.blocks) * f.rows_per_block * f.C, 0.0f);
+  f.SxV.assign(size_t(f.blocks) * f.texels * f.C, 0.0f);
+  for (int k = 0; k < f.blocks; ++k) {
+    const Block& b = m_blocks[size_t(k)];
+    for (Index r = 0; r < b.U.rows(); ++r)
+      for (Index c = 0; c < b.U.cols(); ++c) f.U[(size_t(k) * f.rows_per_block + size_t(r)) * f.C + size_t(c)] = b.U(r, c);
+    for (Index t = 0; t < b.SxV.rows(); ++t)
+      for (Index c = 0; c < b.SxV.cols(); ++c) f.SxV[(size_t(k) * f.texels + size_t(t)) * f.C + size_t(c)] = b.SxV(t, c);
+  }
+  return f;
+}
+
+Result<std::shared_ptr<fmf_cl::DeviceFactors>> FmfModel::device_factors() const {
+  std::lock_guard<std::mutex> lock(m_cl_mutex);
+  if (!m_cl) {
+    BTFC_ASSIGN_OR_RETURN(m_cl, fmf_cl::DeviceFactors::upload(packed()));
+  }
+  return m_cl;
+}
+
+Status FmfModel::decode_cl(const ResolvedRequest& rr, Btf& out) const {
+  BTFC_ASSIGN_OR_RETURN(auto dev, device_factors());
+  std::vector<int> texels(rr.desc.num_texels());
+  for (size_t i = 0; i < texels.size(); ++i)
+    texels[i] = int((rr.x0 + i % size_t(rr.desc.width)) + size_t(m_desc.width) * (rr.y0 + i / size_t(rr.desc.width)));
+  return dev->decode(texels, rr.lights, rr.views, out.data());
+}
+
+Status FmfModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
+  if (m_desc.channels != 3 || !ocl::use_opencl()) return Model::eval_batch(q, out);
+  // Validate through the reference path's checks, then convert to the kernel's query layout:
+  // directions become 3 + 3 (index, weight) pairs (the renderer's index / weight textures).
+  std::vector<btfc_fmf_query> kq(q.size());
+  for (size_t i = 0; i < q.size(); ++i) {
+    const EvalQuery& e = q[i];
+    if (e.x < 0 || e.y < 0 || e.x >= m_desc.width || e.y >= m_desc.height || (e.light >= 0) != (e.view >= 0) ||
+        (e.light >= 0 && (size_t(e.light) >= m_desc.num_lights() || size_t(e.view) >= m_desc.num_views())))
+      return Model::eval_batch(q, out);  // the reference reports the bad query
+  }
+#pragma omp parallel for schedule(static)
+  for (size_t i = 0; i < q.size(); ++i) {
+    const EvalQuery& e = q[i];
+    btfc_fmf_query& k = kq[i];
+    k.texel = e.x + m_desc.width * e.y;
+    DirWeights a, b;
+    if (e.light >= 0) a.index = {e.light, e.light, e.light}, b.index = {e.view, e.view, e.view};
+    else a = m_light_interp.weights(e.wl), b = m_view_interp.weights(e.wv);
+    for (int j = 0; j < 3; ++j) k.light[j] = a.index[j], k.view[j] = b.index[j], k.wl[j] = a.weight[j], k.wv[j] = b.weight[j];
+  }
+  Status s;
+  auto dev = device_factors();
+  s = dev.ok() ? dev.value()->eval_interp(kq, out) : dev.status();
+  if (s.ok()) return s;
+  if (!ocl::fall_back_after(s)) return s;
+  return Model::eval_batch(q, out);
+}
 
 Status FmfModel::decode(const DecodeRequest& req, Btf& out) const {
   BTFC_ASSIGN_OR_RETURN(ResolvedRequest rr, resolve_request(m_desc, req));
   BTFC_ASSIGN_OR_RETURN(out, Btf::create(rr.desc));
+  if (m_desc.channels == 3 && ocl::use_opencl()) {
+    Status s = decode_cl(rr, out);
+    if (s.ok() || !ocl::fall_back_after(s)) return s;
+  }
+  // The C++ reference (and the CPU path): per texel block, one Eigen GEMM per factorized block.
   const Index nl = Index(rr.lights.size()), nv = Index(rr.views.size());
   const Index w = rr.desc.width, n = Index(rr.desc.num_texels()), m = Index(rr.desc.abrdf_size());
   const int nc = m_desc.channels;

@@ -1,0 +1,187 @@
+// fmf OpenCL host code and C++ references; see fmf_cl.h.
+#include "codecs/fmf/fmf_cl.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/cl_runtime.h"
+
+namespace btfc::fmf_cl {
+namespace {
+
+constexpr float k_eps = BTFC_DRR_EPS;
+
+float dot(const float* a, const float* b, int C) {
+  float s = 0;
+  for (int k = 0; k < C; ++k) s = std::fma(a[k], b[k], s);
+  return s;
+}
+
+void undecorrelate(float ylog, float u, float v, float* rgb) {
+  const float y = std::exp(ylog) - k_eps, s = y + k_eps;
+  u *= s, v *= s;
+  rgb[0] = y + 1.13983f * v;
+  rgb[1] = y - 0.39465f * u - 0.5806f * v;
+  rgb[2] = y + 2.03211f * u;
+}
+
+void value(const PackedFactors& f, int texel, int l, int v, float* rgb) {
+  const int C = f.C;
+  if (f.mode == BTFC_FMF_RGB) {
+    const float* sx = f.SxV.data() + size_t(texel) * C;
+    const float* u = f.U.data() + size_t(3 * (l + f.nL * v)) * C;
+    for (int c = 0; c < 3; ++c) rgb[c] = dot(u + c * C, sx, C);
+    return;
+  }
+  const size_t r = size_t(l + f.nL * v) * C, t = size_t(texel) * C;
+  const size_t ub = size_t(f.rows_per_block) * C, sb = size_t(f.texels) * C;
+  undecorrelate(dot(f.U.data() + r, f.SxV.data() + t, C), dot(f.U.data() + ub + r, f.SxV.data() + sb + t, C),
+                dot(f.U.data() + 2 * ub + r, f.SxV.data() + 2 * sb + t, C), rgb);
+}
+
+}  // namespace
+
+void eval_measured_reference(const PackedFactors& f, std::span<const MeasuredQuery> q, float* out) {
+#pragma omp parallel for schedule(static)
+  for (size_t i = 0; i < q.size(); ++i) value(f, q[i].texel, q[i].light, q[i].view, out + 3 * i);
+}
+
+void eval_interp_reference(const PackedFactors& f, std::span<const btfc_fmf_query> q, float* out) {
+#pragma omp parallel for schedule(static)
+  for (size_t i = 0; i < q.size(); ++i) {
+    float acc[3] = {0, 0, 0}, v[3];
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) {
+        const float w = q[i].wl[a] * q[i].wv[b];
+        if (w == 0) continue;
+        value(f, q[i].texel, q[i].light[a], q[i].view[b], v);
+        for (int c = 0; c < 3; ++c) acc[c] += w * v[c];
+      }
+    for (int c = 0; c < 3; ++c) out[3 * i + c] = acc[c];
+  }
+}
+
+void decode_reference(const PackedFactors& f, std::span<const int> texels, std::span<const int> lights,
+                      std::span<const int> views, float* out) {
+  const size_t nl = lights.size(), nv = views.size(), rows = 3 * nl * nv;
+#pragma omp parallel for schedule(static)
+  for (size_t i = 0; i < texels.size(); ++i)
+    for (size_t v = 0; v < nv; ++v)
+      for (size_t l = 0; l < nl; ++l) value(f, texels[i], lights[l], views[v], out + i * rows + 3 * (l + nl * v));
+}
+
+// ---------------------------------------------------------------------------------------------
+
+struct DeviceFactors::Impl {
+  PackedFactors shape;  // host copy: decode gathers the selected rows / texels from it
+  ocl::Buffer U, SxV;
+};
+
+DeviceFactors::~DeviceFactors() = default;
+
+Result<std::shared_ptr<DeviceFactors>> DeviceFactors::upload(const PackedFactors& f) {
+  BTFC_ASSIGN_OR_RETURN(ocl::Runtime * rt, ocl::Runtime::get());
+  auto d = std::shared_ptr<DeviceFactors>(new DeviceFactors());
+  d->m = std::make_unique<Impl>();
+  d->m->shape = f;
+  BTFC_ASSIGN_OR_RETURN(d->m->U, ocl::Buffer::create(*rt, f.U.size() * 4, f.U.data(), CL_MEM_READ_ONLY));
+  BTFC_ASSIGN_OR_RETURN(d->m->SxV, ocl::Buffer::create(*rt, f.SxV.size() * 4, f.SxV.data(), CL_MEM_READ_ONLY));
+  return d;
+}
+
+namespace {
+
+#define BTFC_CL_CHECK(call, what)                                                                          \
+  do {                                                                                                     \
+    cl_int e_ = (call);                                                                                    \
+    if (e_ != CL_SUCCESS) return Status(StatusCode::device_error, std::string(what) + ": " + ocl::cl_error_name(e_)); \
+  } while (0)
+
+// Queries go in slices so each slice's buffers stay far below the device's allocation limit.
+constexpr size_t k_slice = size_t(1) << 22;
+
+template <class Q>
+Status run_eval(const DeviceFactors::Impl& m, const char* kernel_name, std::span<const Q> q, float* out) {
+  BTFC_ASSIGN_OR_RETURN(ocl::Runtime * rt, ocl::Runtime::get());
+  BTFC_ASSIGN_OR_RETURN(cl_command_queue queue, rt->queue());
+  BTFC_ASSIGN_OR_RETURN(cl_kernel k, rt->kernel("fmf", kernel_name));
+  const PackedFactors& s = m.shape;
+  for (size_t first = 0; first < q.size(); first += k_slice) {
+    const size_t n = std::min(k_slice, q.size() - first);
+    BTFC_ASSIGN_OR_RETURN(ocl::Buffer qb, ocl::Buffer::create(*rt, n * sizeof(Q), q.data() + first, CL_MEM_READ_ONLY));
+    BTFC_ASSIGN_OR_RETURN(ocl::Buffer ob, ocl::Buffer::create(*rt, n * 12, nullptr, CL_MEM_WRITE_ONLY));
+    cl_mem u = m.U.get(), sx = m.SxV.get(), qm = qb.get(), om = ob.get();
+    const cl_int C = s.C, nL = s.nL, rpb = s.rows_per_block, tex = s.texels, mode = s.mode, nn = cl_int(n);
+    int a = 0;
+    for (auto [ptr, size] : {std::pair<const void*, size_t>{&u, sizeof(cl_mem)}, {&sx, sizeof(cl_mem)}, {&C, 4}, {&nL, 4},
+                             {&rpb, 4}, {&tex, 4}, {&mode, 4}, {&qm, sizeof(cl_mem)}, {&nn, 4}, {&om, sizeof(cl_mem)}})
+      BTFC_CL_CHECK(clSetKernelArg(k, a++, size, ptr), "clSetKernelArg");
+    const size_t local = 64, global = (n + local - 1) / local * local;
+    BTFC_CL_CHECK(clEnqueueNDRangeKernel(queue, k, 1, nullptr, &global, &local, 0, nullptr, nullptr), kernel_name);
+    BTFC_CL_CHECK(clEnqueueReadBuffer(queue, om, CL_TRUE, 0, n * 12, out + 3 * first, 0, nullptr, nullptr), "read results");
+  }
+  return {};
+}
+
+}  // namespace
+
+Status DeviceFactors::eval_measured(std::span<const MeasuredQuery> q, float* out) const {
+  return run_eval(*m, "fmf_eval_measured", q, out);
+}
+
+Status DeviceFactors::eval_interp(std::span<const btfc_fmf_query> q, float* out) const {
+  return run_eval(*m, "fmf_eval_interp", q, out);
+}
+
+Status DeviceFactors::decode(std::span<const int> texels, std::span<const int> lights, std::span<const int> views,
+                             float* out) const {
+  BTFC_ASSIGN_OR_RETURN(ocl::Runtime * rt, ocl::Runtime::get());
+  BTFC_ASSIGN_OR_RETURN(cl_command_queue queue, rt->queue());
+  const PackedFactors& s = m->shape;
+  const bool rgb = s.mode == BTFC_FMF_RGB;
+  BTFC_ASSIGN_OR_RETURN(cl_kernel k, rt->kernel("fmf", rgb ? "fmf_decode_rgb" : "fmf_decode_dfmf"));
+  const size_t nl = lights.size(), nv = views.size(), dirs = nl * nv, rows = 3 * dirs, C = size_t(s.C);
+  // The selected U rows, transposed per block (kernel reads 16 consecutive rows as a float16).
+  const size_t cols = rgb ? rows : dirs;  // columns of Ut per block
+  std::vector<float> Ut(size_t(s.blocks) * C * cols);
+  {
+    const std::vector<float>& U = s.U;
+    for (int b = 0; b < s.blocks; ++b)
+      for (size_t v = 0; v < nv; ++v)
+        for (size_t l = 0; l < nl; ++l)
+          for (size_t c = 0; c < (rgb ? 3u : 1u); ++c) {
+            const size_t src_row = rgb ? c + 3 * (size_t(lights[l]) + size_t(s.nL) * views[v]) : size_t(lights[l]) + size_t(s.nL) * views[v];
+            const size_t dst_col = rgb ? c + 3 * (l + nl * v) : l + nl * v;
+            for (size_t kk = 0; kk < C; ++kk)
+              Ut[(size_t(b) * C + kk) * cols + dst_col] = U[(size_t(b) * s.rows_per_block + src_row) * C + kk];
+          }
+  }
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer utb, ocl::Buffer::create(*rt, Ut.size() * 4, Ut.data(), CL_MEM_READ_ONLY));
+  // Texel blocks keep the output buffer near 128 MiB.
+  const size_t per_block = std::max<size_t>(1, (size_t(128) << 20) / (rows * 4));
+  std::vector<float> SX;
+  const std::vector<float>& SXall = s.SxV;
+  for (size_t first = 0; first < texels.size(); first += per_block) {
+    const size_t n = std::min(per_block, texels.size() - first);
+    SX.assign(size_t(s.blocks) * n * C, 0.0f);
+    for (int b = 0; b < s.blocks; ++b)
+      for (size_t i = 0; i < n; ++i)
+        std::copy_n(SXall.data() + (size_t(b) * s.texels + size_t(texels[first + i])) * C, C, SX.data() + (size_t(b) * n + i) * C);
+    BTFC_ASSIGN_OR_RETURN(ocl::Buffer sxb, ocl::Buffer::create(*rt, SX.size() * 4, SX.data(), CL_MEM_READ_ONLY));
+    BTFC_ASSIGN_OR_RETURN(ocl::Buffer ob, ocl::Buffer::create(*rt, n * rows * 4, nullptr, CL_MEM_WRITE_ONLY));
+    cl_mem a0 = utb.get(), a1 = sxb.get(), a5 = ob.get();
+    const cl_int Ci = cl_int(C), colsi = cl_int(cols), ni = cl_int(n);
+    BTFC_CL_CHECK(clSetKernelArg(k, 0, sizeof(cl_mem), &a0), "arg");
+    BTFC_CL_CHECK(clSetKernelArg(k, 1, sizeof(cl_mem), &a1), "arg");
+    BTFC_CL_CHECK(clSetKernelArg(k, 2, 4, &Ci), "arg");
+    BTFC_CL_CHECK(clSetKernelArg(k, 3, 4, &colsi), "arg");
+    BTFC_CL_CHECK(clSetKernelArg(k, 4, 4, &ni), "arg");
+    BTFC_CL_CHECK(clSetKernelArg(k, 5, sizeof(cl_mem), &a5), "arg");
+    const size_t global[2] = {(cols + 15) / 16, n};
+    BTFC_CL_CHECK(clEnqueueNDRangeKernel(queue, k, 2, nullptr, global, nullptr, 0, nullptr, nullptr), "fmf_decode");
+    BTFC_CL_CHECK(clEnqueueReadBuffer(queue, a5, CL_TRUE, 0, n * rows * 4, out + first * rows, 0, nullptr, nullptr), "read decode");
+  }
+  return {};
+}
+
+}  // namespace btfc::fmf_cl

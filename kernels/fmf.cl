@@ -1,0 +1,117 @@
+/* fmf kernels (codecs/fmf/fmf_cl.h is the host side, its *_reference functions the C++ truth).
+
+   Factors layout (padded to one component count C for all blocks):
+     U   [blocks][rows_per_block][C]   rgb: 1 block, row = c + 3 (l + nL v); dfmf: 3 blocks Y', U/Y, V/Y, row = l + nL v
+     SxV [blocks][texels][C]
+   Written CPU-style for PoCL (toolchain.md 3): one work-item per query or per 16-row strip of a
+   texel, straight loops, float16 vectors, no local memory and no barriers. */
+
+inline float fmf_dot(__global const float* a, __global const float* b, int C) {
+  float s = 0.0f;
+  for (int k = 0; k < C; ++k) s = mad(a[k], b[k], s);
+  return s;
+}
+
+/* Bonn DFMF colour model 11 inverse: Y = exp(Y') - eps, U = U' (Y + eps), V = V' (Y + eps), then YUV -> RGB. */
+inline float3 fmf_undecorrelate(float ylog, float u, float v) {
+  float y = exp(ylog) - BTFC_DRR_EPS;
+  float s = y + BTFC_DRR_EPS;
+  u *= s;
+  v *= s;
+  return (float3)(y + 1.13983f * v, y - 0.39465f * u - 0.5806f * v, y + 2.03211f * u);
+}
+
+inline float3 fmf_value(__global const float* U, __global const float* SxV, int C, int nL, int rows_per_block,
+                        int texels, int mode, int texel, int l, int v) {
+  if (mode == BTFC_FMF_RGB) {
+    __global const float* sx = SxV + (size_t)texel * C;
+    __global const float* u = U + (size_t)(3 * (l + nL * v)) * C;
+    return (float3)(fmf_dot(u, sx, C), fmf_dot(u + C, sx, C), fmf_dot(u + 2 * C, sx, C));
+  }
+  size_t r = (size_t)(l + nL * v) * C, t = (size_t)texel * C;
+  size_t ub = (size_t)rows_per_block * C, sb = (size_t)texels * C;
+  return fmf_undecorrelate(fmf_dot(U + r, SxV + t, C), fmf_dot(U + ub + r, SxV + sb + t, C),
+                           fmf_dot(U + 2 * ub + r, SxV + 2 * sb + t, C));
+}
+
+/* Evaluation at measured (texel, light, view) triples: q[i] = (texel, light, view, unused). */
+__kernel void fmf_eval_measured(__global const float* U, __global const float* SxV, int C, int nL, int rows_per_block,
+                                int texels, int mode, __global const int4* q, int n, __global float* out) {
+  int i = get_global_id(0);
+  if (i >= n) return;
+  int4 Q = q[i];
+  float3 rgb = fmf_value(U, SxV, C, nL, rows_per_block, texels, mode, Q.x, Q.y, Q.z);
+  vstore3(rgb, i, out);
+}
+
+/* Interpolated evaluation: 3 x 3 = 9 measured values blended with the barycentric weights of
+   the light and view triangles (seed 000 section 4); interpolation in linear RGB. */
+__kernel void fmf_eval_interp(__global const float* U, __global const float* SxV, int C, int nL, int rows_per_block,
+                              int texels, int mode, __global const btfc_fmf_query* q, int n, __global float* out) {
+  int i = get_global_id(0);
+  if (i >= n) return;
+  btfc_fmf_query Q = q[i];
+  float3 acc = (float3)(0.0f);
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b) {
+      float w = Q.wl[a] * Q.wv[b];
+      if (w != 0.0f) acc += w * fmf_value(U, SxV, C, nL, rows_per_block, texels, mode, Q.texel, Q.light[a], Q.view[b]);
+    }
+  vstore3(acc, i, out);
+}
+
+/* Decode, rgb mode: out[t][r] = sum_k SX[t][k] Ut[k][r] for a texel block.
+   Ut is the selected U rows transposed (C x rows), so 16 consecutive rows load as one float16.
+   Work-item (strip, t) computes rows [16 strip, 16 strip + 16) of texel t. */
+__kernel void fmf_decode_rgb(__global const float* Ut, __global const float* SX, int C, int rows, int n, __global float* out) {
+  int r0 = get_global_id(0) * 16, t = get_global_id(1);
+  if (t >= n || r0 >= rows) return;
+  __global const float* sx = SX + (size_t)t * C;
+  __global float* o = out + (size_t)t * rows;
+  if (r0 + 16 <= rows) {
+    float16 acc = (float16)(0.0f);
+    for (int k = 0; k < C; ++k) acc = mad((float16)(sx[k]), vload16(0, Ut + (size_t)k * rows + r0), acc);
+    vstore16(acc, 0, o + r0);
+  } else {
+    for (int r = r0; r < rows; ++r) {
+      float s = 0.0f;
+      for (int k = 0; k < C; ++k) s = mad(sx[k], Ut[(size_t)k * rows + r], s);
+      o[r] = s;
+    }
+  }
+}
+
+/* Decode, dfmf mode: Ut holds 3 blocks (C x dirs each), SX 3 blocks (n x C each); output is
+   RGB interleaved per (light, view) row: out[t][3 d + c]. Work-item (strip of 16 dirs, t). */
+__kernel void fmf_decode_dfmf(__global const float* Ut, __global const float* SX, int C, int dirs, int n, __global float* out) {
+  int d0 = get_global_id(0) * 16, t = get_global_id(1);
+  if (t >= n || d0 >= dirs) return;
+  __global float* o = out + (size_t)t * dirs * 3;
+  size_t ub = (size_t)C * dirs, sb = (size_t)n * C;
+  int dend = min(d0 + 16, dirs);
+  if (d0 + 16 <= dirs) {
+    float16 y = (float16)(0.0f), u = (float16)(0.0f), v = (float16)(0.0f);
+    for (int k = 0; k < C; ++k) {
+      size_t off = (size_t)k * dirs + d0;
+      y = mad((float16)(SX[(size_t)t * C + k]), vload16(0, Ut + off), y);
+      u = mad((float16)(SX[sb + (size_t)t * C + k]), vload16(0, Ut + ub + off), u);
+      v = mad((float16)(SX[2 * sb + (size_t)t * C + k]), vload16(0, Ut + 2 * ub + off), v);
+    }
+    float yy[16], uu[16], vv[16];
+    vstore16(y, 0, yy);
+    vstore16(u, 0, uu);
+    vstore16(v, 0, vv);
+    for (int j = 0; j < 16; ++j) vstore3(fmf_undecorrelate(yy[j], uu[j], vv[j]), d0 + j, o);
+  } else {
+    for (int d = d0; d < dend; ++d) {
+      float y = 0.0f, u = 0.0f, v = 0.0f;
+      for (int k = 0; k < C; ++k) {
+        size_t off = (size_t)k * dirs + d;
+        y = mad(SX[(size_t)t * C + k], Ut[off], y);
+        u = mad(SX[sb + (size_t)t * C + k], Ut[ub + off], u);
+        v = mad(SX[2 * sb + (size_t)t * C + k], Ut[2 * ub + off], v);
+      }
+      vstore3(fmf_undecorrelate(y, u, v), d, o);
+    }
+  }
+}
