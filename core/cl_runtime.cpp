@@ -275,4 +275,25 @@ Result<Buffer> Buffer::create(Runtime& rt, size_t bytes, const void* host, cl_me
   return b;
 }
 
+Result<Buffer> Buffer::wrap(Runtime& rt, size_t bytes, void* host, cl_mem_flags flags) {
+  if (bytes > rt.info().max_alloc)
+    return Status(StatusCode::device_error, "OpenCL buffer of " + std::to_string(bytes) + " bytes exceeds the device's maximum allocation of " +
+                                                std::to_string(rt.info().max_alloc));
+  cl_int err = CL_SUCCESS;
+  Buffer b;
+  b.m_mem = clCreateBuffer(rt.context(), flags | CL_MEM_USE_HOST_PTR, bytes, host, &err);
+  if (err != CL_SUCCESS) return Status(StatusCode::device_error, "clCreateBuffer(USE_HOST_PTR, " + std::to_string(bytes) + " bytes): " + cl_error_name(err));
+  return b;
+}
+
+Status Buffer::sync_to_host(cl_command_queue q, size_t bytes) const {
+  cl_int err = CL_SUCCESS;
+  void* p = clEnqueueMapBuffer(q, m_mem, CL_TRUE, CL_MAP_READ, 0, bytes, 0, nullptr, nullptr, &err);
+  if (err != CL_SUCCESS) return Status(StatusCode::device_error, "clEnqueueMapBuffer: " + cl_error_name(err));
+  err = clEnqueueUnmapMemObject(q, m_mem, p, 0, nullptr, nullptr);
+  if (err == CL_SUCCESS) err = clFinish(q);
+  if (err != CL_SUCCESS) return Status(StatusCode::device_error, "clEnqueueUnmapMemObject: " + cl_error_name(err));
+  return {};
+}
+
 }  // namespace btfc::ocl

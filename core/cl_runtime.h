@@ -88,6 +88,11 @@ class Buffer {
   }
   // Creates a buffer of `bytes`, copying `host` into it when non-null.
   static Result<Buffer> create(Runtime& rt, size_t bytes, const void* host, cl_mem_flags flags);
+  // Wraps caller memory (CL_MEM_USE_HOST_PTR): zero-copy on CPU devices such as PoCL, so large
+  // results land in their destination without a fresh allocation and a second copy.
+  static Result<Buffer> wrap(Runtime& rt, size_t bytes, void* host, cl_mem_flags flags);
+  // Makes the device's writes to a wrapped buffer visible in host memory (map + unmap).
+  Status sync_to_host(cl_command_queue q, size_t bytes) const;
   cl_mem get() const { return m_mem; }
   void reset() {
     if (m_mem) clReleaseMemObject(m_mem);

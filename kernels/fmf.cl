@@ -6,9 +6,16 @@
    Written CPU-style for PoCL (toolchain.md 3): one work-item per query or per 16-row strip of a
    texel, straight loops, float16 vectors, no local memory and no barriers. */
 
+/* Dot product over the C components: 8 lanes of partial sums (a float8 FMA per step) rather
+   than one serial FMA chain, whose latency would bound the throughput on a CPU. The C++
+   reference sums in the same order. */
 inline float fmf_dot(__global const float* a, __global const float* b, int C) {
-  float s = 0.0f;
-  for (int k = 0; k < C; ++k) s = mad(a[k], b[k], s);
+  float8 acc = (float8)(0.0f);
+  int k = 0;
+  for (; k + 8 <= C; k += 8) acc = mad(vload8(0, a + k), vload8(0, b + k), acc);
+  float4 h = acc.lo + acc.hi;
+  float s = (h.x + h.y) + (h.z + h.w);
+  for (; k < C; ++k) s = mad(a[k], b[k], s);
   return s;
 }
 
@@ -62,23 +69,35 @@ __kernel void fmf_eval_interp(__global const float* U, __global const float* SxV
 
 /* Decode, rgb mode: out[t][r] = sum_k SX[t][k] Ut[k][r] for a texel block.
    Ut is the selected U rows transposed (C x rows), so 16 consecutive rows load as one float16.
-   Work-item (strip, t) computes rows [16 strip, 16 strip + 16) of texel t. */
+   Work-item (strip, tb) computes rows [16 strip, 16 strip + 16) of texels 4 tb .. 4 tb + 3: each
+   Ut load feeds 4 texels (register blocking, toolchain.md 3c). */
 __kernel void fmf_decode_rgb(__global const float* Ut, __global const float* SX, int C, int rows, int n, __global float* out) {
-  int r0 = get_global_id(0) * 16, t = get_global_id(1);
-  if (t >= n || r0 >= rows) return;
-  __global const float* sx = SX + (size_t)t * C;
-  __global float* o = out + (size_t)t * rows;
-  if (r0 + 16 <= rows) {
-    float16 acc = (float16)(0.0f);
-    for (int k = 0; k < C; ++k) acc = mad((float16)(sx[k]), vload16(0, Ut + (size_t)k * rows + r0), acc);
-    vstore16(acc, 0, o + r0);
-  } else {
-    for (int r = r0; r < rows; ++r) {
-      float s = 0.0f;
-      for (int k = 0; k < C; ++k) s = mad(sx[k], Ut[(size_t)k * rows + r], s);
-      o[r] = s;
+  int r0 = get_global_id(0) * 16, t0 = get_global_id(1) * 4;
+  if (t0 >= n || r0 >= rows) return;
+  int nt = min(4, n - t0);
+  if (r0 + 16 <= rows && nt == 4) {
+    __global const float* s0 = SX + (size_t)t0 * C;
+    float16 a0 = (float16)(0.0f), a1 = a0, a2 = a0, a3 = a0;
+    for (int k = 0; k < C; ++k) {
+      float16 u = vload16(0, Ut + (size_t)k * rows + r0);
+      a0 = mad((float16)(s0[k]), u, a0);
+      a1 = mad((float16)(s0[C + k]), u, a1);
+      a2 = mad((float16)(s0[2 * C + k]), u, a2);
+      a3 = mad((float16)(s0[3 * C + k]), u, a3);
     }
+    vstore16(a0, 0, out + (size_t)t0 * rows + r0);
+    vstore16(a1, 0, out + (size_t)(t0 + 1) * rows + r0);
+    vstore16(a2, 0, out + (size_t)(t0 + 2) * rows + r0);
+    vstore16(a3, 0, out + (size_t)(t0 + 3) * rows + r0);
+    return;
   }
+  int rend = min(r0 + 16, rows);
+  for (int t = t0; t < t0 + nt; ++t)
+    for (int r = r0; r < rend; ++r) {
+      float s = 0.0f;
+      for (int k = 0; k < C; ++k) s = mad(SX[(size_t)t * C + k], Ut[(size_t)k * rows + r], s);
+      out[(size_t)t * rows + r] = s;
+    }
 }
 
 /* Decode, dfmf mode: Ut holds 3 blocks (C x dirs each), SX 3 blocks (n x C each); output is

@@ -11,9 +11,15 @@ namespace {
 
 constexpr float k_eps = BTFC_DRR_EPS;
 
+// The kernel's summation order: 8 lanes of partial sums, then a pairwise reduction and the tail.
 float dot(const float* a, const float* b, int C) {
-  float s = 0;
-  for (int k = 0; k < C; ++k) s = std::fma(a[k], b[k], s);
+  float acc[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+  int k = 0;
+  for (; k + 8 <= C; k += 8)
+    for (int j = 0; j < 8; ++j) acc[j] = std::fma(a[k + j], b[k + j], acc[j]);
+  const float h0 = acc[0] + acc[4], h1 = acc[1] + acc[5], h2 = acc[2] + acc[6], h3 = acc[3] + acc[7];
+  float s = (h0 + h1) + (h2 + h3);
+  for (; k < C; ++k) s = std::fma(a[k], b[k], s);
   return s;
 }
 
@@ -108,8 +114,8 @@ Status run_eval(const DeviceFactors::Impl& m, const char* kernel_name, std::span
   const PackedFactors& s = m.shape;
   for (size_t first = 0; first < q.size(); first += k_slice) {
     const size_t n = std::min(k_slice, q.size() - first);
-    BTFC_ASSIGN_OR_RETURN(ocl::Buffer qb, ocl::Buffer::create(*rt, n * sizeof(Q), q.data() + first, CL_MEM_READ_ONLY));
-    BTFC_ASSIGN_OR_RETURN(ocl::Buffer ob, ocl::Buffer::create(*rt, n * 12, nullptr, CL_MEM_WRITE_ONLY));
+    BTFC_ASSIGN_OR_RETURN(ocl::Buffer qb, ocl::Buffer::wrap(*rt, n * sizeof(Q), const_cast<Q*>(q.data() + first), CL_MEM_READ_ONLY));
+    BTFC_ASSIGN_OR_RETURN(ocl::Buffer ob, ocl::Buffer::wrap(*rt, n * 12, out + 3 * first, CL_MEM_WRITE_ONLY));
     cl_mem u = m.U.get(), sx = m.SxV.get(), qm = qb.get(), om = ob.get();
     const cl_int C = s.C, nL = s.nL, rpb = s.rows_per_block, tex = s.texels, mode = s.mode, nn = cl_int(n);
     int a = 0;
@@ -118,7 +124,7 @@ Status run_eval(const DeviceFactors::Impl& m, const char* kernel_name, std::span
       BTFC_CL_CHECK(clSetKernelArg(k, a++, size, ptr), "clSetKernelArg");
     const size_t local = 64, global = (n + local - 1) / local * local;
     BTFC_CL_CHECK(clEnqueueNDRangeKernel(queue, k, 1, nullptr, &global, &local, 0, nullptr, nullptr), kernel_name);
-    BTFC_CL_CHECK(clEnqueueReadBuffer(queue, om, CL_TRUE, 0, n * 12, out + 3 * first, 0, nullptr, nullptr), "read results");
+    BTFC_RETURN_IF_ERROR(ob.sync_to_host(queue, n * 12));
   }
   return {};
 }
@@ -168,7 +174,7 @@ Status DeviceFactors::decode(std::span<const int> texels, std::span<const int> l
       for (size_t i = 0; i < n; ++i)
         std::copy_n(SXall.data() + (size_t(b) * s.texels + size_t(texels[first + i])) * C, C, SX.data() + (size_t(b) * n + i) * C);
     BTFC_ASSIGN_OR_RETURN(ocl::Buffer sxb, ocl::Buffer::create(*rt, SX.size() * 4, SX.data(), CL_MEM_READ_ONLY));
-    BTFC_ASSIGN_OR_RETURN(ocl::Buffer ob, ocl::Buffer::create(*rt, n * rows * 4, nullptr, CL_MEM_WRITE_ONLY));
+    BTFC_ASSIGN_OR_RETURN(ocl::Buffer ob, ocl::Buffer::wrap(*rt, n * rows * 4, out + first * rows, CL_MEM_WRITE_ONLY));
     cl_mem a0 = utb.get(), a1 = sxb.get(), a5 = ob.get();
     const cl_int Ci = cl_int(C), colsi = cl_int(cols), ni = cl_int(n);
     BTFC_CL_CHECK(clSetKernelArg(k, 0, sizeof(cl_mem), &a0), "arg");
@@ -177,9 +183,10 @@ Status DeviceFactors::decode(std::span<const int> texels, std::span<const int> l
     BTFC_CL_CHECK(clSetKernelArg(k, 3, 4, &colsi), "arg");
     BTFC_CL_CHECK(clSetKernelArg(k, 4, 4, &ni), "arg");
     BTFC_CL_CHECK(clSetKernelArg(k, 5, sizeof(cl_mem), &a5), "arg");
-    const size_t global[2] = {(cols + 15) / 16, n};
+    // rgb: each work-item does 16 rows x 4 texels; dfmf: 16 directions x 1 texel.
+    const size_t global[2] = {(cols + 15) / 16, rgb ? (n + 3) / 4 : n};
     BTFC_CL_CHECK(clEnqueueNDRangeKernel(queue, k, 2, nullptr, global, nullptr, 0, nullptr, nullptr), "fmf_decode");
-    BTFC_CL_CHECK(clEnqueueReadBuffer(queue, a5, CL_TRUE, 0, n * rows * 4, out + first * rows, 0, nullptr, nullptr), "read decode");
+    BTFC_RETURN_IF_ERROR(ob.sync_to_host(queue, n * rows * 4));
   }
   return {};
 }
