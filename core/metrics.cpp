@@ -30,11 +30,11 @@ constexpr double k_sigma = 1.5;
 constexpr int k_radius = 5;  // 11 x 11: scikit-image's int(3.5 * sigma + 0.5) for sigma 1.5
 constexpr double k_k1 = 0.01, k_k2 = 0.03;
 // Per-thread luminance buffer budget (two float images per batched image), batch cap and
-// prefetch distance in texels. Measured on 256 x 256 x 81 x 81: batches of 16 to 128 images
-// cost about the same once the buffers are padded (see mean_ssim), larger ones only use memory.
+// prefetch distance in texels. Measured on 128^2 and 256^2 x 81 x 81: with padded buffers (see
+// mean_ssim) batches of 16 to 128 images cost about the same, 16 slightly least (-8 % CPU).
 constexpr size_t k_batch_bytes = size_t(32) << 20;
-constexpr size_t k_max_batch = 64;
-constexpr size_t k_prefetch = 8;
+constexpr size_t k_max_batch = 16;
+constexpr size_t k_prefetch = 4;
 
 std::vector<double> gaussian_taps(int r) {
   std::vector<double> g(size_t(2 * r + 1));
@@ -133,7 +133,7 @@ double mean_ssim(const Btf& ref, const Btf& test, double L) {
   // extracting a batch of them texel by texel uses whole cache lines and pays each texel's page
   // walk once per batch; one image at a time would fetch a 64-byte line per texel for 3 floats.
   // Images in the buffers are padded 16 floats apart: with a power-of-two image size (256 x 256)
-  // all of a texel's writes would land in one cache set (measured 1.5-2x slower at batch 64).
+  // all of a texel's writes would land in one cache set (1.9x slower at batch 64, neutral at 16).
   const size_t ps = n_tex + 16;
   const size_t batch = std::clamp<size_t>(k_batch_bytes / (2 * sizeof(float) * ps), 1, k_max_batch);
   const long long n_batches = (long long)((n_img + batch - 1) / batch);

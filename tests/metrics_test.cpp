@@ -246,7 +246,7 @@ double reference_mean_ssim(const Btf& a, const Btf& b, double L) {
 }
 
 TEST(Metrics, MeanSsimIsAverageOfImageSsims) {
-  // 9 x 8 = 72 images: more than one extraction batch (at most 64 images), the last partial.
+  // 9 x 8 = 72 images: several extraction batches (at most 16 images), the last partial.
   for (int channels : {3, 1, 2}) {
     Btf a = make_btf(make_desc(13, 11, 9, 8, channels));
     Btf b = make_btf(a.desc());
