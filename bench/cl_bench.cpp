@@ -88,6 +88,17 @@ int main(int argc, char** argv) {
   double tc = best_of(3, [&] { (void)dev.value()->eval_interp(iq, out.data()); });
   double tr = best_of(3, [&] { fmf_cl::eval_interp_reference(f, iq, out.data()); });
   report("fmf_eval_interp", tc, tr, double(nq), "evals");
+  // Coherent stream, as a renderer issues it: whole images of texels (in scan order) under one
+  // (light, view) direction pair each, the pair changing per image.
+  std::vector<btfc_fmf_query> cq(nq);
+  for (size_t i = 0; i < nq; ++i) {
+    const size_t img = i / size_t(texels);
+    cq[i] = iq[img % nq];
+    cq[i].texel = int(i % size_t(texels));
+  }
+  tc = best_of(3, [&] { (void)dev.value()->eval_interp(cq, out.data()); });
+  tr = best_of(3, [&] { fmf_cl::eval_interp_reference(f, cq, out.data()); });
+  report("fmf_eval_interp coh.", tc, tr, double(nq), "evals");
   tc = best_of(3, [&] { (void)dev.value()->eval_measured(mq, out.data()); });
   tr = best_of(3, [&] { fmf_cl::eval_measured_reference(f, mq, out.data()); });
   report("fmf_eval_measured", tc, tr, double(nq), "evals");
