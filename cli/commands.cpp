@@ -259,6 +259,7 @@ int cmd_decompress(const Global& g, const DecompressArgs& a) {
   auto model = load_model(rd.value());
   if (!model.ok()) return fail(g, model.status());
   DecodeRequest req;
+  req.lod = a.lod;
   if (!a.region.empty()) {
     auto r = parse_ints(a.region, "--region");
     if (!r.ok()) return fail(g, r.status());
@@ -305,8 +306,10 @@ int cmd_eval(const Global& g, const EvalArgs& a) {
     if (*a.light < 0 || size_t(*a.light) >= d.num_lights() || *a.view < 0 || size_t(*a.view) >= d.num_views())
       return fail(g, invalid_argument("--light/--view index outside the direction sets (" + std::to_string(d.num_lights()) +
                                       " lights, " + std::to_string(d.num_views()) + " views)"));
-    m.eval(x, y, *a.light, *a.view, out.data());
+    Status s = m.eval_lod(x, y, *a.light, *a.view, a.lod, out.data());
+    if (!s.ok()) return fail(g, s);
   } else {
+    if (a.lod != 0) return fail(g, invalid_argument("--lod works with --light/--view (measured directions)"));
     if (a.wl.empty() || a.wv.empty()) return fail(g, invalid_argument("--wl and --wv go together"));
     auto wl = parse_theta_phi(a.wl, "--wl");
     if (!wl.ok()) return fail(g, wl.status());

@@ -37,6 +37,7 @@ struct DecompressArgs {
   std::string region;               // "x,y,w,h"
   std::string lights, views;        // "0,3,5"
   std::string format = "exr";
+  double lod = 0;                   // level of detail (lpyr); 0 = full detail
 };
 
 struct EvalArgs {
@@ -44,6 +45,7 @@ struct EvalArgs {
   std::string texel;                // "x,y"
   std::optional<int> light, view;   // measured indices
   std::string wl, wv;               // "theta,phi" in degrees
+  double lod = 0;
 };
 
 struct CompareArgs {

@@ -61,6 +61,7 @@ int main(int argc, char** argv) {
   decompress->add_option("--lights", da.lights, "comma-separated light indices");
   decompress->add_option("--views", da.views, "comma-separated view indices");
   decompress->add_option("--format", da.format, "image-set format")->check(CLI::IsMember({"exr", "png"}));
+  decompress->add_option("--lod", da.lod, "level of detail (lpyr): 0 = full detail")->check(CLI::Range(0.0, 64.0));
   decompress->callback([&] { code = cmd_decompress(g, da); });
 
   EvalArgs ea;
@@ -72,6 +73,7 @@ int main(int argc, char** argv) {
   auto* ov = eval->add_option("--view", view, "measured view index");
   eval->add_option("--wl", ea.wl, "light direction THETA,PHI in degrees (interpolated)");
   eval->add_option("--wv", ea.wv, "view direction THETA,PHI in degrees (interpolated)");
+  eval->add_option("--lod", ea.lod, "level of detail (lpyr), with --light/--view: 0 = full detail")->check(CLI::Range(0.0, 64.0));
   eval->callback([&] {
     if (ol->count()) ea.light = light;
     if (ov->count()) ea.view = view;
