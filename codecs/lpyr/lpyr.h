@@ -1,0 +1,81 @@
+// Codec `lpyr`: Laplacian-pyramid PCA with a Phong-fitted mean and continuous level of detail.
+//
+// Paper: W.-C. Ma, S.-H. Chao, Y.-T. Tseng, Y.-Y. Chuang, C.-F. Chang, B.-Y. Chen, M. Ouhyoung,
+// "Level-of-detail representation of bidirectional texture functions for real-time rendering",
+// I3D 2005
+// (../shared/seeds/001_086d83e1c01d1abc.txt, sections 3.1-3.4; results 4.2).
+//
+// Model (per colour channel c of YCbCr, level k = 0..lmax, texel p, direction row r = l + nL v):
+//   F_0 = the BTF image, F_{k+1} = down(box3 * F_k), L_k = F_k - up(F_{k+1})     (eqs. 2-3)
+//   L_k(p, r) ~ sum_j d_kj(p) e_kj(r) [+ mu_k(r)]                                 (eq. 4)
+//   F_lmax(p, r) ~ sum_j d_j(p) e_j(r) + mu'(r),  mu'_Y = Phong (eq. 5), mu'_Cb,Cr = const (eq. 6)
+//   value(p, r; lambda) = sum_{k >= floor(lambda)} w_k (D_k . E_k [+ mu_k])(p >> k, r) + mu'(r),
+//   w_k = clamp(1 - lambda + k, 0, 1), then YCbCr -> RGB                          (eq. 7)
+// lambda = 0 is full detail; lambda = k (integer) gives up^k(F_k): the BTF filtered to level k;
+// lambda = lmax is the top level (a nearly texture-free BRDF for the default level count).
+//
+// Exact choices (the paper leaves them open):
+//  - Colour: ITU-R BT.601 full range (Kr 0.299, Kb 0.114) on the linear float data, no chroma
+//    offset; exact inverse. 3-channel BTFs only.
+//  - Odd sizes: w_{k+1} = ceil(w_k / 2); box3 uses clamped (replicated) borders and is sampled at
+//    even coordinates; up-sampling is nearest neighbour, texel (x, y) of level k reads
+//    (x / 2, y / 2) of level k + 1 (the extra last row/column is cropped). So level k of any
+//    level-0 texel is (x >> k, y >> k). 1x1 BTFs have lmax = 0 (plain PCA with mean).
+//  - Levels (`levels=0`): the paper's stop rule, lmax = the first k with w_k h_k <= 2 y (as many
+//    texels as about twice the Y components; 64x64, y=8 -> lmax 4 as in the paper), capped where
+//    the level becomes 1x1. `levels=n` asks for lmax = n - 1 (clamped the same way; the clamp
+//    is noted in the stats).
+//  - PCA per level and channel: fmf's truncated SVD (codecs/fmf/svd.h) of the d x N_k matrix
+//    (d = nL nV directions, N_k texels): exact Gram eigen-decomposition on the small side when
+//    min(d, N_k) <= 256, else randomized range finder (GEMM passes; 16 oversampling columns,
+//    4 power iterations, seeded by Context::seed). Components: y for Y, c for Cb and Cr, clamped
+//    to the data's numerical rank.
+//  - Laplacian means (`laplacian_mean`): the paper drops them (their expectation is zero). We
+//    measure each level's mean energy fraction f = N_k |mu_k|^2 / |L_k|^2; `auto` keeps the mean
+//    (d floats, f32) when f > 1e-2, i.e. when it carries more than 1 % of the level's energy
+//    (the textured synthetic and measured data give f ~ 1e-4 .. 1e-3: dropped). Reported per level.
+//  - Top mean (`mean`): the mean is computed, the Y mean fitted by Phong (Ceres LM, see
+//    lpyr_internal.h), Cb/Cr by their averages. `phong` uses the fit, `stored` stores the three
+//    mean vectors (f32), `auto` uses Phong unless its relative residual |mu_Y - phong| / |mu_Y|
+//    exceeds 0.1 (a material Phong cannot describe); the stats report the residuals and the
+//    choice. The top level's PCA is computed on F_lmax minus the *chosen* mean, so with Phong
+//    the components also absorb the systematic part of the Phong misfit.
+//
+// Stored tensors (precision=half: E and D in f16, D divided per component by scale; else f32):
+//   levels        u32 [lmax+1, 6]  per level: w, h, C_y, C_cb, C_cr, flags (bit c: mean of
+//                                  channel c stored; bit 3: top mean is Phong)
+//   E.<k>.<ch>    [d, C]           eigen-Laplacian-BRDFs, ch in y, cb, cr
+//   D.<k>.<ch>    [N_k, C]         PCA weights / scale
+//   scale.<k>.<ch> f32 [C]
+//   mean.<k>.<ch>  f32 [d]         only when its flag is set
+//   phong         f32 [6]          ka, kd, ks, alpha, Cb constant, Cr constant (Phong top only)
+//
+// GPU tensors (paper section 3.3; need y <= 8 and c <= 2, missing components are zero):
+//   eigen_map      f32 [(lmax+1) nV, 3 nL, 4]: RGBA texel (row k nV + v, column j nL + l) holds
+//                  slot j of level k at light l, view v: j=0 Y e1..e4, j=1 Y e5..e8,
+//                  j=2 (Cb e1, Cb e2, Cr e1, Cr e2). 3p x (lmax+1)q for p = nL, q = nV.
+//   weight_map     f32 [H2, W2, 4]: level k's three slots (same j order, RGBA = the matching
+//                  weights d_kj) are w_k x h_k images at (ox_k, oy_k), (ox_k + w_k, oy_k) and
+//                  (ox_k, oy_k + h_k), with (ox_0, oy_0) = (0, 0), (ox_{k+1}, oy_{k+1}) =
+//                  (ox_k + w_k, oy_k + h_k): each level nests in the previous one's fourth
+//                  quadrant. W2 = max_k ox_k + 2 w_k (= 2r for r x r, r a power of two), rows
+//                  are texel rows y (row 0 = y 0). Unused texels are 0.
+//   mean_map       f32 [(lmax+1) nV, nL, 4]: (Y, Cb, Cr, 0) mean added at level k (zero for
+//                  dropped Laplacian means; the top row block is the evaluated top mean mu').
+//   phong          f32 [6]  ka, kd, ks, alpha, Cb, Cr (only when the top mean is Phong)
+//   direction_lut  u32 [2, 32, 32]: nearest measured light (plane 0) / view (plane 1) index for
+//                  the parabolic coordinate p = (-1 + (j + 0.5) / 16, -1 + (i + 0.5) / 16)
+//                  at row i, column j (p outside the unit disc is moved onto its rim).
+//   A renderer evaluates eq. 7 with D from weight_map at (p >> k) in level k's slots, E from
+//   eigen_map at the LUT's (l, v), adds w_k mean_map (or Phong for the top), then YCbCr -> RGB.
+//
+// Parameters: levels (0 auto), y (8), c (2), mean (auto|phong|stored), laplacian_mean
+// (auto|keep|drop), precision (half|float). See the table in lpyr.cpp for ranges.
+#pragma once
+#include "codecs/codec.h"
+
+namespace btfc {
+
+const Codec& lpyr_codec();
+
+}  // namespace btfc
