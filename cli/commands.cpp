@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "codecs/codec.h"
+#include "codecs/lpca/lpca.h"
 #include "core/cl_runtime.h"
 #include "core/container.h"
 #include "core/metrics.h"
@@ -344,6 +345,33 @@ int cmd_compare(const Global& g, const CompareArgs& a) {
     if (a.ssim) std::printf("  mean SSIM %.5f", x.mean_ssim);
     std::printf("\n");
   }
+  return 0;
+}
+
+int cmd_relight(const Global& g, const RelightArgs& a) {
+  auto rd = ContainerReader::open(a.in);
+  if (!rd.ok()) return fail(g, rd.status());
+  auto model = load_model(rd.value());
+  if (!model.ok()) return fail(g, model.status());
+  auto view = parse_theta_phi(a.view, "--view");
+  if (!view.ok()) return fail(g, view.status());
+  auto t0 = Clock::now();
+  auto env = project_environment(a.env, a.order);
+  if (!env.ok()) return fail(g, env.status());
+  const double project_s = seconds_since(t0);
+  t0 = Clock::now();
+  int w = 0, h = 0;
+  auto img = relight(*model.value(), env.value(), view.value(), w, h);
+  if (!img.ok()) return fail(g, img.status().with_context(a.in));
+  const double relight_s = seconds_since(t0);
+  Status s = write_rgb_exr(a.out, w, h, img.value());
+  if (!s.ok()) return fail(g, s);
+  if (g.json)
+    std::cout << json{{"output", a.out}, {"width", w}, {"height", h}, {"sh_order", a.order}, {"project_seconds", project_s},
+                      {"relight_seconds", relight_s}}.dump(2) << "\n";
+  else if (!g.quiet)
+    std::cout << "relit " << a.in << " under " << a.env << " (SH order " << a.order << ", projection " << project_s << " s, relight "
+              << relight_s << " s) -> " << a.out << " (" << w << "x" << h << ")\n";
   return 0;
 }
 

@@ -48,6 +48,11 @@ struct EvalArgs {
   double lod = 0;
 };
 
+struct RelightArgs {
+  std::string in, env, view, out;  // view: "theta,phi" degrees
+  int order = 5;
+};
+
 struct CompareArgs {
   std::string a, b;
   bool ssim = true;
@@ -72,6 +77,7 @@ int cmd_compress(const Global& g, const CompressArgs& a);
 int cmd_decompress(const Global& g, const DecompressArgs& a);
 int cmd_eval(const Global& g, const EvalArgs& a);
 int cmd_compare(const Global& g, const CompareArgs& a);
+int cmd_relight(const Global& g, const RelightArgs& a);
 int cmd_bench(const Global& g, const BenchArgs& a);
 
 }  // namespace btfc::cli

@@ -91,6 +91,15 @@ int main(int argc, char** argv) {
     code = cmd_compare(g, cm);
   });
 
+  RelightArgs ra;
+  auto* relight = app.add_subcommand("relight", "render an lpca model's flat sample under a lat-long HDR environment (spherical harmonics)");
+  relight->add_option("input", ra.in, "lpca model .btfc")->required();
+  relight->add_option("--env", ra.env, "lat-long environment map (EXR, row 0 = zenith)")->required();
+  relight->add_option("--view", ra.view, "view direction THETA,PHI in degrees")->required();
+  relight->add_option("-o,--output", ra.out, "output image (EXR, one pixel per texel)")->required();
+  relight->add_option("--order", ra.order, "spherical-harmonic bands of the environment")->check(CLI::Range(1, 16));
+  relight->callback([&] { code = cmd_relight(g, ra); });
+
   BenchArgs ba;
   bool no_header = false;
   auto* bench = app.add_subcommand("bench", "compress, decode and compare with one or more codec specs; one table row each");

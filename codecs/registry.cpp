@@ -1,6 +1,7 @@
 // The explicit codec table. Adding a codec: one folder under codecs/ and one line here.
 #include "codecs/codec.h"
 #include "codecs/fmf/fmf.h"
+#include "codecs/lpca/lpca.h"
 #include "codecs/lpyr/lpyr.h"
 
 namespace btfc {
@@ -9,6 +10,7 @@ std::span<const Codec* const> all_codecs() {
   static const Codec* const k_codecs[] = {
       &fmf_codec(),
       &lpyr_codec(),
+      &lpca_codec(),
   };
   return k_codecs;
 }

@@ -1,0 +1,62 @@
+// Local PCA of per-texel ABRDFs (Kambhatla-Leen style iterative clustering, as used by
+// Mueller et al. and seed 002 section 3) for the lpca codec.
+//
+// Algorithm:
+//  1. Seeding: k-means++ (seeded by ctx.seed) on a 32-dimensional Gaussian sketch of the
+//     ABRDFs (Johnson-Lindenstrauss: distances are preserved to ~25 %, enough for seeding; exact
+//     k-means++ would stream the whole BTF once per cluster). Every texel joins its nearest seed.
+//  2. Repeat up to `iters` times:
+//     a. PCA step, per cluster: mean + `components` eigen-BRDFs of the centered members
+//        (fmf::truncated_svd: exact Gram eigen-decomposition when the cluster's smaller side is
+//        <= 384, randomized otherwise). If the previous basis reconstructs the members better
+//        (possible only through randomized-SVD inaccuracy) it is kept, so this step never
+//        increases the error. The total squared error after this step is recorded per iteration.
+//     b. Stop if this was the last iteration or the previous assignment step changed nothing.
+//     c. Assignment step: the error of texel x in cluster k is ||x - mu_k||^2 - ||E_k^T (x - mu_k)||^2
+//        (orthonormal E_k), computed for all k at once by one float GEMM per block of texels
+//        against the stacked [mu_k E_k] of all clusters. A texel moves only when another cluster
+//        is better by more than the GEMM's rounding margin (1e-5 of ||x||^2 + ||mu||^2), so
+//        float noise cannot make the error grow or the assignment oscillate.
+//     d. Empty clusters are re-seeded with the worst-reconstructed texels taken from clusters
+//        that keep at least one member; with fewer texels than clusters some stay empty.
+//  Per-iteration error is therefore non-increasing (up to float rounding of the sums).
+//  Contracts: deterministic for a given seed; no NaN for all-zero or constant inputs (a cluster
+//  whose centered data is zero gets zero eigen-BRDFs); empty clusters are dropped from the result
+//  (cluster ids compacted), so every returned cluster has >= 1 member.
+#pragma once
+#include <Eigen/Core>
+#include <cstdint>
+#include <vector>
+
+#include "core/btf.h"
+#include "core/progress.h"
+#include "core/status.h"
+
+namespace btfc::lpca {
+
+using MatrixXfR = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+struct FitOptions {
+  int clusters = 32;
+  int components = 8;
+  int iters = 10;
+  uint64_t seed = 1;
+  Progress* progress = nullptr;
+};
+
+struct FitResult {
+  int clusters = 0;                   // used (non-empty) clusters K
+  int components = 0;                 // c per cluster (zero-padded when a cluster has lower rank)
+  std::vector<uint32_t> cluster_of;   // [texels] -> [0, K)
+  MatrixXfR table;                    // [K * (c + 1)] x abrdf_size: row k*(c+1) = mean, then E_k1..E_kc
+  MatrixXfR weights;                  // [texels] x c: E^T (x - mu) for the texel's cluster
+  std::vector<double> sq_error;       // total squared error after each PCA step
+  std::vector<int> changes;           // texels moved by each assignment step (+ re-seeds)
+  int reseeded = 0;                   // empty clusters re-seeded, all iterations
+  double total_energy = 0;            // ||B||_F^2
+  bool converged = false;             // an assignment step changed nothing
+};
+
+Result<FitResult> fit_local_pca(const Btf& btf, const FitOptions& opt);
+
+}  // namespace btfc::lpca

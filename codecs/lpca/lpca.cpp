@@ -1,0 +1,328 @@
+// lpca codec and model; see lpca.h for the paper, the stored tensors and the frames.
+#include "codecs/lpca/lpca.h"
+
+#include <Imath/half.h>
+#include <chrono>
+#include <cmath>
+
+#include "codecs/lpca/clustering.h"
+#include "codecs/lpca/lpca_model.h"
+#include "codecs/lpca/sh.h"
+
+namespace btfc {
+namespace lpca {
+
+using Eigen::Index;
+
+namespace {
+
+constexpr uint32_t k_payload_version = 1;
+
+const ParamSpec k_params[] = {
+    {"clusters", ParamSpec::Type::integer, "32", 1, 4096, {}, "clusters K of the local PCA (empty ones are dropped)"},
+    {"components", ParamSpec::Type::integer, "8", 1, 256, {}, "eigen-BRDFs c_B per cluster (besides the mean)"},
+    {"iters", ParamSpec::Type::integer, "10", 1, 1000, {}, "maximum {PCA, reassignment} iterations"},
+    {"precision", ParamSpec::Type::choice, "half", 0, 0, {"half", "float"}, "storage of the eigen-BRDF table and the weights"},
+    {"sh_order", ParamSpec::Type::integer, "5", 1, sh::k_max_order, {}, "spherical-harmonic order n (n^2 coefficients) for relighting / PRT"},
+};
+
+Config config_from(const Params& p) {
+  return {int(p.get_int("components")), p.get("precision") == "half", int(p.get_int("sh_order"))};
+}
+
+float round_half(float x) { return float(Imath::half(x)); }
+
+Tensor make_tensor(const std::string& name, DType dt, std::vector<uint64_t> shape, const float* data, size_t n) {
+  if (dt == DType::f32) return Tensor::from_f32(name, std::move(shape), data);
+  Tensor t;
+  t.name = name;
+  t.dtype = DType::f16;
+  t.shape = std::move(shape);
+  t.bytes.resize(n * 2);
+  for (size_t i = 0; i < n; ++i) {
+    const uint16_t bits = Imath::half(data[i]).bits();
+    t.bytes[2 * i] = uint8_t(bits & 0xff);
+    t.bytes[2 * i + 1] = uint8_t(bits >> 8);
+  }
+  return t;
+}
+
+Tensor cluster_tensor(const std::string& name, const BtfDesc& d, const std::vector<uint32_t>& cl) {
+  Tensor t;
+  t.name = name;
+  t.dtype = DType::u16;
+  t.shape = {uint64_t(d.height), uint64_t(d.width)};
+  t.bytes.resize(cl.size() * 2);
+  for (size_t i = 0; i < cl.size(); ++i) t.bytes[2 * i] = uint8_t(cl[i] & 0xff), t.bytes[2 * i + 1] = uint8_t(cl[i] >> 8);
+  return t;
+}
+
+}  // namespace
+
+LpcaModel::LpcaModel(BtfDesc desc, std::string spec, Config cfg, std::vector<uint32_t> cluster_of, MatrixXfR table,
+                     MatrixXfR weights, std::vector<float> mean_scale, std::vector<float> weight_scale)
+    : m_desc(std::move(desc)), m_spec(std::move(spec)), m_cfg(cfg), m_cluster_of(std::move(cluster_of)), m_table(std::move(table)),
+      m_weights(std::move(weights)), m_mean_scale(std::move(mean_scale)), m_weight_scale(std::move(weight_scale)),
+      m_light_interp(m_desc.lights), m_view_interp(m_desc.views) {
+  m_clusters = int(m_table.rows() / (m_cfg.components + 1));
+  m_light_w = sh::hemisphere_cell_weights(m_desc.lights);
+  // SH of every table row per (view, channel): one small GEMM (n^2 x lights) x (lights x channels).
+  const int n2 = sh::num_coeffs(m_cfg.sh_order), nc = m_desc.channels;
+  const Index nl = Index(m_desc.num_lights()), nv = Index(m_desc.num_views()), rows = m_table.rows();
+  Eigen::MatrixXf Yw(n2, nl);
+  std::vector<double> y(static_cast<size_t>(n2));
+  for (Index l = 0; l < nl; ++l) {
+    const Vec3& d = m_desc.lights.dirs[size_t(l)];
+    sh::eval_basis(m_cfg.sh_order, d.x, d.y, d.z, y.data());
+    for (int j = 0; j < n2; ++j) Yw(j, l) = float(m_light_w[size_t(l)] * y[size_t(j)]);
+  }
+  m_eigen_sh.assign(size_t(rows) * size_t(nv) * size_t(nc) * size_t(n2), 0.f);
+#pragma omp parallel for schedule(static)
+  for (Index r = 0; r < rows * nv; ++r) {
+    const Index row = r / nv, v = r % nv;
+    Eigen::Map<const MatrixXfR> F(m_table.row(row).data() + v * nl * nc, nl, nc);  // lights x channels
+    const Eigen::MatrixXf S = Yw * F;                                            // n2 x channels
+    float* dst = m_eigen_sh.data() + size_t(r) * size_t(nc) * size_t(n2);
+    for (int c = 0; c < nc; ++c)
+      for (int j = 0; j < n2; ++j) dst[size_t(c) * size_t(n2) + size_t(j)] = S(j, c);
+  }
+}
+
+void LpcaModel::eval(int x, int y, int l, int v, float* out) const {
+  const size_t t = size_t(x) + size_t(m_desc.width) * size_t(y);
+  const int c = m_cfg.components;
+  const Index r0 = Index(m_cluster_of[t]) * (c + 1);
+  for (int ch = 0; ch < m_desc.channels; ++ch) {
+    const Index col = Index(m_desc.row(size_t(l), size_t(v), size_t(ch)));
+    float s = m_table(r0, col);
+    for (int i = 0; i < c; ++i) s += m_weights(Index(t), i) * m_table(r0 + 1 + i, col);
+    out[ch] = s;
+  }
+}
+
+Status LpcaModel::eval_dir(int x, int y, const Vec3& wl, const Vec3& wv, float* out) const {
+  if (x < 0 || y < 0 || x >= m_desc.width || y >= m_desc.height)
+    return invalid_argument("texel (" + std::to_string(x) + ", " + std::to_string(y) + ") outside the BTF");
+  const DirWeights a = m_light_interp.weights(wl), b = m_view_interp.weights(wv);
+  float acc[64] = {0}, tmp[64];
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      const float w = a.weight[size_t(i)] * b.weight[size_t(j)];
+      if (w == 0) continue;
+      eval(x, y, a.index[size_t(i)], b.index[size_t(j)], tmp);
+      for (int c = 0; c < m_desc.channels; ++c) acc[c] += w * tmp[c];
+    }
+  for (int c = 0; c < m_desc.channels; ++c) out[c] = acc[c];
+  return {};
+}
+
+Status LpcaModel::decode(const DecodeRequest& req, Btf& out) const {
+  BTFC_ASSIGN_OR_RETURN(ResolvedRequest rr, resolve_request(m_desc, req));
+  BTFC_ASSIGN_OR_RETURN(out, Btf::create(rr.desc));
+  const int nc = m_desc.channels, c = m_cfg.components;
+  const Index nl = Index(rr.lights.size()), nv = Index(rr.views.size()), m = Index(rr.desc.abrdf_size());
+  const bool all_rows = m == Index(m_desc.abrdf_size());
+  MatrixXfR sub;  // the table's columns in the output's row order
+  if (!all_rows) {
+    sub.resize(m_table.rows(), m);
+    for (Index v = 0; v < nv; ++v)
+      for (Index l = 0; l < nl; ++l)
+        for (int ch = 0; ch < nc; ++ch)
+          sub.col(ch + nc * (l + nl * v)) = m_table.col(Index(m_desc.row(size_t(rr.lights[size_t(l)]), size_t(rr.views[size_t(v)]), size_t(ch))));
+  }
+  const MatrixXfR& T = all_rows ? m_table : sub;
+  const Index w = rr.desc.width, n = Index(rr.desc.num_texels());
+#pragma omp parallel for schedule(static)
+  for (Index i = 0; i < n; ++i) {
+    const Index t = (rr.x0 + i % w) + Index(m_desc.width) * (rr.y0 + i / w);
+    const Index r0 = Index(m_cluster_of[size_t(t)]) * (c + 1);
+    Eigen::Map<Eigen::RowVectorXf> dst(out.data() + size_t(i) * size_t(m), m);
+    dst = T.row(r0);
+    for (int k = 0; k < c; ++k) dst += m_weights(t, k) * T.row(r0 + 1 + k);
+  }
+  return {};
+}
+
+Status LpcaModel::save(ContainerWriter& w) const {
+  const int c = m_cfg.components, K = m_clusters;
+  const DType dt = m_cfg.half ? DType::f16 : DType::f32;
+  const uint64_t rows = m_desc.abrdf_size();
+  MatrixXfR tq = m_table;
+  for (int k = 0; k < K; ++k) tq.row(Index(k) * (c + 1)) /= m_mean_scale[size_t(k)];
+  MatrixXfR wq = m_weights;
+  for (Index t = 0; t < wq.rows(); ++t)
+    for (int i = 0; i < c; ++i) wq(t, i) /= m_weight_scale[size_t(m_cluster_of[size_t(t)]) * size_t(c) + size_t(i)];
+  w.add_tensor(cluster_tensor("cluster", m_desc, m_cluster_of));
+  w.add_tensor(make_tensor("table", dt, {uint64_t(K), uint64_t(c + 1), rows}, tq.data(), size_t(tq.size())));
+  w.add_tensor(Tensor::from_f32("mean_scale", {uint64_t(K)}, m_mean_scale.data()));
+  w.add_tensor(make_tensor("weights", dt, {uint64_t(m_desc.height), uint64_t(m_desc.width), uint64_t(c)}, wq.data(), size_t(wq.size())));
+  w.add_tensor(Tensor::from_f32("weight_scale", {uint64_t(K), uint64_t(c)}, m_weight_scale.data()));
+  return {};
+}
+
+uint64_t LpcaModel::payload_bytes() const {
+  const uint64_t scalar = m_cfg.half ? 2 : 4;
+  return 2 * uint64_t(m_cluster_of.size()) + scalar * uint64_t(m_table.size() + m_weights.size()) +
+         4 * uint64_t(m_mean_scale.size() + m_weight_scale.size());
+}
+
+Result<std::vector<Tensor>> LpcaModel::gpu_tensors() const {
+  std::vector<Tensor> out;
+  const int c = m_cfg.components, n2 = sh::num_coeffs(m_cfg.sh_order);
+  out.push_back(cluster_tensor("cluster_index", m_desc, m_cluster_of));
+  out.push_back(Tensor::from_f32("weights", {uint64_t(m_desc.height), uint64_t(m_desc.width), uint64_t(c)}, m_weights.data()));
+  out.push_back(Tensor::from_f32("eigen_brdfs", {uint64_t(m_clusters), uint64_t(c + 1), m_desc.abrdf_size()}, m_table.data()));
+  out.push_back(Tensor::from_f32("eigen_sh", {uint64_t(m_clusters), uint64_t(c + 1), m_desc.num_views(), uint64_t(m_desc.channels), uint64_t(n2)},
+                                 m_eigen_sh.data()));
+  std::vector<float> vd;
+  for (const Vec3& d : m_desc.views.dirs) vd.insert(vd.end(), {d.x, d.y, d.z});
+  out.push_back(Tensor::from_f32("view_dirs", {m_desc.num_views(), 3}, vd.data()));
+  for (const Tensor& t : m_prt)
+    if (t.name == "prt" || t.name == "prt_scale") out.push_back(t);
+  return out;
+}
+
+namespace {
+
+class LpcaCodec final : public Codec {
+ public:
+  const char* name() const override { return "lpca"; }
+  const char* summary() const override { return "local PCA of ABRDFs + SH relighting / PRT, seed 002 sections 3-5"; }
+  uint32_t payload_version() const override { return k_payload_version; }
+  std::span<const ParamSpec> params() const override { return k_params; }
+
+  Result<std::unique_ptr<Model>> encode(const Btf& btf, const Params& p, Context& ctx) const override {
+    const BtfDesc& d = btf.desc();
+    BTFC_RETURN_IF_ERROR(btf.check_finite("lpca input"));
+    if (d.channels > 64) return unsupported("lpca: more than 64 channels");
+    const auto t0 = std::chrono::steady_clock::now();
+    const Config cfg = config_from(p);
+    FitOptions fo;
+    fo.clusters = int(p.get_int("clusters"));
+    fo.components = cfg.components;
+    fo.iters = int(p.get_int("iters"));
+    fo.seed = ctx.seed;
+    fo.progress = ctx.progress;
+    BTFC_ASSIGN_OR_RETURN(FitResult fit, fit_local_pca(btf, fo));
+    const auto t1 = std::chrono::steady_clock::now();
+    const int K = fit.clusters, c = cfg.components;
+    const Index dim = Index(d.abrdf_size()), N = Index(d.num_texels());
+
+    // Storage rounding of the table, then the weights re-projected onto the rounded table, so the
+    // weights compensate the table's rounding.
+    std::vector<float> mean_scale(size_t(K), 1.f), weight_scale(size_t(K) * size_t(c), 1.f);
+    if (cfg.half) {
+      for (int k = 0; k < K; ++k) {
+        auto mean = fit.table.row(Index(k) * (c + 1));
+        const float mx = mean.cwiseAbs().maxCoeff();
+        if (mx > 0 && std::isfinite(mx)) mean_scale[size_t(k)] = mx;
+        const float s = mean_scale[size_t(k)];
+        mean = mean.unaryExpr([s](float x) { return round_half(x / s) * s; });
+        fit.table.middleRows(Index(k) * (c + 1) + 1, c) = fit.table.middleRows(Index(k) * (c + 1) + 1, c).unaryExpr(&round_half);
+      }
+    }
+    const Eigen::Map<const Eigen::MatrixXf> X(btf.data(), dim, N);
+    double err = 0;
+#pragma omp parallel for schedule(static) reduction(+ : err)
+    for (Index t = 0; t < N; ++t) {
+      const Index r0 = Index(fit.cluster_of[size_t(t)]) * (c + 1);
+      const Eigen::VectorXf xc = X.col(t) - fit.table.row(r0).transpose();
+      const Eigen::VectorXf w = fit.table.middleRows(r0 + 1, c) * xc;
+      fit.weights.row(t) = w.transpose();
+      err += std::max(0.0, xc.cast<double>().squaredNorm() - w.cast<double>().squaredNorm());
+    }
+    if (cfg.half) {
+      for (int k = 0; k < K; ++k)
+        for (int i = 0; i < c; ++i) {
+          float mx = 0;
+          for (Index t = 0; t < N; ++t)
+            if (int(fit.cluster_of[size_t(t)]) == k) mx = std::max(mx, std::abs(fit.weights(t, i)));
+          if (mx > 0 && std::isfinite(mx)) weight_scale[size_t(k) * size_t(c) + size_t(i)] = mx;
+        }
+      for (Index t = 0; t < N; ++t)
+        for (int i = 0; i < c; ++i) {
+          const float s = weight_scale[size_t(fit.cluster_of[size_t(t)]) * size_t(c) + size_t(i)];
+          fit.weights(t, i) = round_half(fit.weights(t, i) / s) * s;
+        }
+    }
+
+    ModelStats st;
+    st.add("clusters_requested", double(fo.clusters));
+    st.add("clusters_used", double(K));
+    st.add("components", double(c));
+    st.add("iterations", double(fit.sq_error.size()));
+    st.add("converged", fit.converged ? 1 : 0);
+    st.add("reseeded", double(fit.reseeded));
+    const double total = fit.total_energy > 0 ? fit.total_energy : 1;
+    for (size_t i = 0; i < fit.sq_error.size(); ++i) st.add("rel_error.iter" + std::to_string(i), std::sqrt(fit.sq_error[i] / total));
+    for (size_t i = 0; i < fit.changes.size(); ++i) st.add("changes.iter" + std::to_string(i), double(fit.changes[i]));
+    st.add("rel_error_estimate", std::sqrt(err / total));
+    st.add("cluster_seconds", std::chrono::duration<double>(t1 - t0).count());
+    if (K < fo.clusters)
+      st.note("clusters", std::to_string(fo.clusters - K) + " of " + std::to_string(fo.clusters) + " clusters stayed empty (fewer texels than clusters)");
+    auto model = std::make_unique<LpcaModel>(d, p.canonical(), cfg, std::move(fit.cluster_of), std::move(fit.table), std::move(fit.weights),
+                                             std::move(mean_scale), std::move(weight_scale));
+    st.add("encode_seconds", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    model->mutable_stats() = std::move(st);
+    return std::unique_ptr<Model>(std::move(model));
+  }
+
+  Result<std::unique_ptr<Model>> load(const ContainerReader& rd) const override {
+    const std::string& path = rd.path();
+    if (rd.codec().payload_version > k_payload_version)
+      return unsupported(path + ": lpca payload version " + std::to_string(rd.codec().payload_version) + " is newer than this btfc supports (" +
+                         std::to_string(k_payload_version) + ")");
+    BTFC_ASSIGN_OR_RETURN(auto spec, parse_spec_string(rd.codec().spec));
+    BTFC_ASSIGN_OR_RETURN(Params p, bind_params(spec, k_params));
+    const Config cfg = config_from(p);
+    const BtfDesc& d = rd.desc();
+    if (d.channels > 64) return corrupt_data(path + ": lpca with more than 64 channels");
+    const int c = cfg.components;
+    const TensorInfo* ti = rd.find("table");
+    if (!ti || ti->shape.size() != 3) return corrupt_data(path + ": lpca tensor 'table' missing or not 3-D");
+    const uint64_t K = ti->shape[0];
+    if (K == 0 || K > uint64_t(p.get_int("clusters")))
+      return corrupt_data(path + ": lpca tensor 'table' has " + std::to_string(K) + " clusters (spec allows 1.." + std::to_string(p.get_int("clusters")) + ")");
+    const DType dt = cfg.half ? DType::f16 : DType::f32;
+    const uint64_t rows = d.abrdf_size(), H = uint64_t(d.height), W = uint64_t(d.width);
+    BTFC_ASSIGN_OR_RETURN(Tensor table_t, rd.read_checked("table", dt, {K, uint64_t(c + 1), rows}));
+    BTFC_ASSIGN_OR_RETURN(Tensor cluster_t, rd.read_checked("cluster", DType::u16, {H, W}));
+    BTFC_ASSIGN_OR_RETURN(Tensor ms_t, rd.read_checked("mean_scale", DType::f32, {K}));
+    BTFC_ASSIGN_OR_RETURN(Tensor w_t, rd.read_checked("weights", dt, {H, W, uint64_t(c)}));
+    BTFC_ASSIGN_OR_RETURN(Tensor ws_t, rd.read_checked("weight_scale", DType::f32, {K, uint64_t(c)}));
+    BTFC_ASSIGN_OR_RETURN(std::vector<float> table, table_t.to_f32());
+    BTFC_ASSIGN_OR_RETURN(std::vector<float> wv, w_t.to_f32());
+    BTFC_ASSIGN_OR_RETURN(std::vector<float> ms, ms_t.to_f32());
+    BTFC_ASSIGN_OR_RETURN(std::vector<float> ws, ws_t.to_f32());
+    for (float s : ms)
+      if (!std::isfinite(s) || s <= 0) return corrupt_data(path + ": lpca tensor 'mean_scale' holds a non-positive or non-finite scale");
+    for (float s : ws)
+      if (!std::isfinite(s) || s <= 0) return corrupt_data(path + ": lpca tensor 'weight_scale' holds a non-positive or non-finite scale");
+    std::vector<uint32_t> cluster_of(size_t(H * W));
+    for (size_t i = 0; i < cluster_of.size(); ++i) {
+      cluster_of[i] = uint32_t(cluster_t.bytes[2 * i]) | (uint32_t(cluster_t.bytes[2 * i + 1]) << 8);
+      if (cluster_of[i] >= K) return corrupt_data(path + ": lpca tensor 'cluster' holds index " + std::to_string(cluster_of[i]) + " >= " + std::to_string(K) + " clusters");
+    }
+    MatrixXfR T = Eigen::Map<MatrixXfR>(table.data(), Index(K) * (c + 1), Index(rows));
+    MatrixXfR Wt = Eigen::Map<MatrixXfR>(wv.data(), Index(H * W), c);
+    if (!T.allFinite()) return corrupt_data(path + ": lpca tensor 'table' holds non-finite values");
+    if (!Wt.allFinite()) return corrupt_data(path + ": lpca tensor 'weights' holds non-finite values");
+    for (uint64_t k = 0; k < K; ++k) T.row(Index(k) * (c + 1)) *= ms[k];
+    for (Index t = 0; t < Wt.rows(); ++t)
+      for (int i = 0; i < c; ++i) Wt(t, i) *= ws[size_t(cluster_of[size_t(t)]) * size_t(c) + size_t(i)];
+    auto model = std::make_unique<LpcaModel>(d, p.canonical(), cfg, std::move(cluster_of), std::move(T), std::move(Wt), std::move(ms), std::move(ws));
+    model->mutable_stats().add("clusters_used", double(K));
+    model->mutable_stats().add("components", double(c));
+    return std::unique_ptr<Model>(std::move(model));
+  }
+};
+
+}  // namespace
+}  // namespace lpca
+
+const Codec& lpca_codec() {
+  static const lpca::LpcaCodec codec;
+  return codec;
+}
+
+}  // namespace btfc
