@@ -381,7 +381,7 @@ int cmd_bench(const Global& g, const BenchArgs& a) {
   const std::string label = a.label.empty() ? a.in : a.label;
   json rows = json::array();
   if (!g.json && a.header)
-    std::printf("%-22s %-44s %9s %10s %9s %8s %9s %9s\n", "data", "codec", "ratio", "RMSE", "PSNR", "SSIM", "enc s", "dec s");
+    std::printf("%-18s %-30s %9s %10s %9s %8s %9s %9s\n", "data", "codec (as given)", "ratio", "RMSE", "PSNR", "SSIM", "enc s", "dec s");
   for (const std::string& spec : a.specs) {
     auto resolved = resolve_spec(spec);
     if (!resolved.ok()) return fail(g, resolved.status());
@@ -402,14 +402,15 @@ int cmd_bench(const Global& g, const BenchArgs& a) {
     auto m = compare_btf(btf.value(), out, true);
     if (!m.ok()) return fail(g, m.status());
     const double ratio = double(btf->desc().num_values()) * 4.0 / double(model.value()->payload_bytes());
-    rows.push_back({{"data", label}, {"spec", model.value()->spec()}, {"ratio", ratio}, {"payload_bytes", model.value()->payload_bytes()},
+    rows.push_back({{"data", label}, {"spec", model.value()->spec()}, {"spec_given", spec}, {"ratio", ratio}, {"payload_bytes", model.value()->payload_bytes()},
                     {"rmse", m->rmse}, {"rel_l2", num(m->rel_l2)}, {"psnr", num(m->psnr)}, {"mean_ssim", m->mean_ssim},
-                    {"encode_seconds", enc_s}, {"decode_seconds", dec_s}});
+                    {"encode_seconds", enc_s}, {"decode_seconds", dec_s}, {"device", ocl::device_summary()}});
     if (!g.json)
-      std::printf("%-22s %-44s %9.2f %10.4g %9.3f %8.5f %9.3f %9.3f\n", label.c_str(), model.value()->spec().c_str(), ratio,
+      std::printf("%-18s %-30s %9.2f %10.4g %9.3f %8.5f %9.3f %9.3f\n", label.c_str(), spec.c_str(), ratio,
                   m->rmse, m->psnr, m->mean_ssim, enc_s, dec_s);
   }
   if (g.json) std::cout << rows.dump(2) << "\n";
+  else std::printf("kernels ran on %s\n", ocl::device_summary().c_str());
   return 0;
 }
 

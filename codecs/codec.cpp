@@ -3,6 +3,7 @@
 #include <sstream>
 
 #include "codecs/codec.h"
+#include "core/cl_runtime.h"
 
 namespace btfc {
 
@@ -23,6 +24,7 @@ static std::string stats_text(const ModelStats& st) {
   os.precision(9);
   for (const auto& [k, v] : st.numbers) os << k << " = " << v << "\n";
   for (const auto& [k, v] : st.notes) os << k << " = " << v << "\n";
+  os << "device = " << ocl::device_summary() << "\n";
   return os.str();
 }
 

@@ -264,6 +264,14 @@ std::string fallback_reason() {
   return g_fallback_reason;
 }
 
+std::string device_summary() {
+  const std::string why = fallback_reason();
+  if (!why.empty()) return "cpu: " + why;
+  if (device_choice() == DeviceChoice::cpu) return "cpu: CPU path chosen (--device cpu or BTFC_FORCE_CPU=1)";
+  auto rt = Runtime::get();
+  return rt.ok() ? "opencl: " + rt.value()->info().name : "cpu: " + rt.status().message();
+}
+
 Result<Buffer> Buffer::create(Runtime& rt, size_t bytes, const void* host, cl_mem_flags flags) {
   if (bytes > rt.info().max_alloc)
     return Status(StatusCode::device_error, "OpenCL buffer of " + std::to_string(bytes) + " bytes exceeds the device's maximum allocation of " +

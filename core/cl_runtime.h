@@ -73,6 +73,9 @@ std::string fallback_reason();
 // BTFC_KERNEL_DIR).
 Result<std::string> kernel_source(const std::string& program);
 
+// Where this process's kernels ran, for statistics: "opencl: <device>", "cpu: <reason>".
+std::string device_summary();
+
 // "CL_OUT_OF_RESOURCES (-5)"
 std::string cl_error_name(cl_int err);
 
