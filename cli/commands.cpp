@@ -15,6 +15,7 @@
 #include "core/container.h"
 #include "core/metrics.h"
 #include "core/synth.h"
+#include "formats/bonn/bonn_btf.h"
 #include "formats/btf_io.h"
 
 namespace btfc::cli {
@@ -42,6 +43,10 @@ int fail(const Global& g, const Status& s) {
 }
 
 namespace {
+
+bool ends_with(const std::string& s, const std::string& suffix) {
+  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
 
 double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
@@ -164,6 +169,26 @@ int cmd_synth(const Global& g, const SynthArgs& a) {
   return 0;
 }
 
+static int info_bonn(const Global& g, const std::string& path) {
+  BonnInfo info;
+  auto model = open_bonn_model(path, &info);
+  if (!model.ok()) return fail(g, model.status());
+  const BtfDesc& d = info.desc;
+  json j{{"path", path}, {"format", std::string("Bonn ") + bonn_kind_name(info.kind)}, {"signature", info.signature},
+         {"desc", d.summary()}, {"width", d.width}, {"height", d.height}, {"channels", d.channels}, {"lights", d.num_lights()},
+         {"views", d.num_views()}, {"file_bytes", info.file_size},
+         {"ratio_vs_float32", double(d.num_values()) * 4.0 / double(info.file_size)}, {"ubo2014_dome1", info.dome1}};
+  for (const auto& [k, v] : info.notes()) j[k] = v;
+  if (g.json) {
+    std::cout << j.dump(2) << "\n";
+    return 0;
+  }
+  std::cout << path << ": Bonn " << bonn_kind_name(info.kind) << " (" << info.signature << "), " << info.file_size << " bytes\n"
+            << "  " << d.summary() << "\n";
+  for (const auto& [k, v] : info.notes()) std::cout << "  " << k << ": " << v << "\n";
+  return 0;
+}
+
 int cmd_info(const Global& g, const std::string& path, bool verify) {
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec)) {
@@ -174,6 +199,7 @@ int cmd_info(const Global& g, const std::string& path, bool verify) {
     else std::cout << path << ": image set, " << d.summary() << (d.hdr ? ", HDR" : ", LDR (sRGB-decoded)") << "\n";
     return 0;
   }
+  if (is_bonn_btf(path)) return info_bonn(g, path);
   auto rd = ContainerReader::open(path);
   if (!rd.ok()) return fail(g, rd.status());
   if (verify) {
@@ -236,7 +262,8 @@ int cmd_compress(const Global& g, const CompressArgs& a) {
   auto model = codec->encode(btf.value(), params, ctx);
   if (!model.ok()) return fail(g, model.status().with_context(a.in));
   const double enc_s = seconds_since(t0);
-  Status s = save_model(*model.value(), *codec, a.out);
+  Status s = ends_with(a.out, ".btf") ? write_bonn(*model.value(), a.out, params.get("precision") == "half")
+                                      : save_model(*model.value(), *codec, a.out);
   if (!s.ok()) return fail(g, s);
   const double ratio = double(btf->desc().num_values()) * 4.0 / double(std::filesystem::file_size(a.out));
   if (g.json) {
@@ -255,9 +282,7 @@ int cmd_compress(const Global& g, const CompressArgs& a) {
 }
 
 int cmd_decompress(const Global& g, const DecompressArgs& a) {
-  auto rd = ContainerReader::open(a.in);
-  if (!rd.ok()) return fail(g, rd.status());
-  auto model = load_model(rd.value());
+  auto model = open_model(a.in);
   if (!model.ok()) return fail(g, model.status());
   DecodeRequest req;
   req.lod = a.lod;
@@ -289,9 +314,7 @@ int cmd_eval(const Global& g, const EvalArgs& a) {
   auto xy = parse_ints(a.texel, "--texel");
   if (!xy.ok()) return fail(g, xy.status());
   if (xy->size() != 2) return fail(g, invalid_argument("--texel: expected X,Y"));
-  auto rd = ContainerReader::open(a.in);
-  if (!rd.ok()) return fail(g, rd.status());
-  auto model = load_model(rd.value());
+  auto model = open_model(a.in);
   if (!model.ok()) return fail(g, model.status());
   const Model& m = *model.value();
   const BtfDesc& d = m.desc();
@@ -349,9 +372,7 @@ int cmd_compare(const Global& g, const CompareArgs& a) {
 }
 
 int cmd_relight(const Global& g, const RelightArgs& a) {
-  auto rd = ContainerReader::open(a.in);
-  if (!rd.ok()) return fail(g, rd.status());
-  auto model = load_model(rd.value());
+  auto model = open_model(a.in);
   if (!model.ok()) return fail(g, model.status());
   auto view = parse_theta_phi(a.view, "--view");
   if (!view.ok()) return fail(g, view.status());
@@ -372,6 +393,26 @@ int cmd_relight(const Global& g, const RelightArgs& a) {
   else if (!g.quiet)
     std::cout << "relit " << a.in << " under " << a.env << " (SH order " << a.order << ", projection " << project_s << " s, relight "
               << relight_s << " s) -> " << a.out << " (" << w << "x" << h << ")\n";
+  return 0;
+}
+
+int cmd_convert(const Global& g, const ConvertArgs& a) {
+  auto model = open_model(a.in);
+  if (!model.ok()) return fail(g, model.status());
+  Status s;
+  if (ends_with(a.out, ".btf")) {
+    s = write_bonn(*model.value(), a.out, a.precision == "half");
+  } else if (ends_with(a.out, ".btfc")) {
+    auto spec = parse_spec_string(model.value()->spec());
+    const Codec* codec = spec.ok() ? find_codec(spec->codec) : nullptr;
+    if (!codec) return fail(g, unsupported(a.in + ": its model cannot be stored as .btfc"));
+    s = save_model(*model.value(), *codec, a.out);
+  } else {
+    return fail(g, invalid_argument("convert: the output must end in .btf (Bonn) or .btfc"));
+  }
+  if (!s.ok()) return fail(g, s);
+  if (g.json) std::cout << json{{"input", a.in}, {"output", a.out}}.dump(2) << "\n";
+  else if (!g.quiet) std::cout << "converted " << a.in << " -> " << a.out << "\n";
   return 0;
 }
 

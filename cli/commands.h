@@ -53,6 +53,11 @@ struct RelightArgs {
   int order = 5;
 };
 
+struct ConvertArgs {
+  std::string in, out;
+  std::string precision = "half";  // Bonn output scalars
+};
+
 struct CompareArgs {
   std::string a, b;
   bool ssim = true;
@@ -78,6 +83,7 @@ int cmd_decompress(const Global& g, const DecompressArgs& a);
 int cmd_eval(const Global& g, const EvalArgs& a);
 int cmd_compare(const Global& g, const CompareArgs& a);
 int cmd_relight(const Global& g, const RelightArgs& a);
+int cmd_convert(const Global& g, const ConvertArgs& a);
 int cmd_bench(const Global& g, const BenchArgs& a);
 
 }  // namespace btfc::cli

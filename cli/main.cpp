@@ -47,9 +47,9 @@ int main(int argc, char** argv) {
 
   CompressArgs ca;
   auto* compress = app.add_subcommand("compress", "compress a BTF into a model (.btfc)");
-  compress->add_option("input", ca.in, "image-set directory or raw .btfc")->required();
+  compress->add_option("input", ca.in, "image-set directory, raw .btfc, model .btfc or Bonn .btf")->required();
   compress->add_option("-c,--codec", ca.spec, "codec spec string, e.g. fmf:rank=32:precision=half")->required();
-  compress->add_option("-o,--output", ca.out, "output .btfc")->required();
+  compress->add_option("-o,--output", ca.out, "output .btfc, or .btf (Bonn DFMF / FMF, fmf models)")->required();
   compress->add_option("--seed", ca.seed, "random seed (randomized algorithms)");
   compress->callback([&] { code = cmd_compress(g, ca); });
 
@@ -90,6 +90,13 @@ int main(int argc, char** argv) {
     cm.ssim = !no_ssim;
     code = cmd_compare(g, cm);
   });
+
+  ConvertArgs cv;
+  auto* convert = app.add_subcommand("convert", "convert a model between .btfc and Bonn .btf (DFMF / FMF)");
+  convert->add_option("input", cv.in, "model .btfc or Bonn .btf")->required();
+  convert->add_option("-o,--output", cv.out, "OUT.btf (Bonn: DFMF for per-channel models, FMF for rgb) or OUT.btfc")->required();
+  convert->add_option("--precision", cv.precision, "Bonn scalars")->check(CLI::IsMember({"half", "float"}));
+  convert->callback([&] { code = cmd_convert(g, cv); });
 
   RelightArgs ra;
   auto* relight = app.add_subcommand("relight", "render an lpca model's flat sample under a lat-long HDR environment (spherical harmonics)");

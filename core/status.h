@@ -56,7 +56,8 @@ class [[nodiscard]] Result {
   }
   T& value() & { return std::get<T>(m_v); }
   const T& value() const& { return std::get<T>(m_v); }
-  T&& value() && { return std::get<T>(std::move(m_v)); }
+  // By value: `for (auto& x : make().value())` must not bind to a dying temporary's member.
+  T value() && { return std::get<T>(std::move(m_v)); }
   T& operator*() & { return value(); }
   const T& operator*() const& { return value(); }
   T* operator->() { return &value(); }

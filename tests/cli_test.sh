@@ -47,6 +47,23 @@ check decompress-images 0 "$BTFC" decompress "$W/m.btfc" -o "$W/imgs" --lights 0
 test -f "$W/imgs/tv000_pv000/tl015_pl000_tv000_pv000.exr" && echo "ok   image-set-written" || { echo "FAIL image-set-written"; fails=$((fails + 1)); }
 check compare-imageset 0 "$BTFC" compare "$W/imgs" "$W/imgs"
 
+# Bonn .btf: write DFMF / FMF from fmf models, read them back as models, convert.
+check bonn-dfmf 0 "$BTFC" compress "$W/s.btfc" -c fmf:color=dfmf:rank=8:chroma_rank=4 -o "$W/m.btf"
+check bonn-info 0 "$BTFC" info "$W/m.btf"
+expect_grep bonn-info-sig "!DFMF08FCR" "$W/out.txt"
+check bonn-fmf 0 "$BTFC" compress "$W/s.btfc" -c fmf:rank=8 -o "$W/f.btf"
+check bonn-compare 0 "$BTFC" --json compare "$W/s.btfc" "$W/m.btf"
+python3 -c "import json,sys; m=json.load(open(sys.argv[1])); assert 1e-4 < m['rel_l2'] < 0.5, m; print('ok   bonn-values', m['rel_l2'])" "$W/out.txt" || fails=$((fails + 1))
+check bonn-eval 0 "$BTFC" eval "$W/m.btf" --texel 2,2 --wl 20,30 --wv 40,100
+check bonn-recompress 0 "$BTFC" compress "$W/m.btf" -c lpyr -o "$W/l.btfc"
+check bonn-convert 0 "$BTFC" convert "$W/m.btf" -o "$W/m2.btfc"
+check bonn-convert-back 0 "$BTFC" convert "$W/m2.btfc" -o "$W/m3.btf"
+check bonn-same 0 "$BTFC" --json compare "$W/m.btf" "$W/m3.btf"
+python3 -c "import json,sys; m=json.load(open(sys.argv[1])); assert m['rmse'] == 0, m; print('ok   bonn-convert-exact')" "$W/out.txt" || fails=$((fails + 1))
+head -c 40 "$W/m.btf" > "$W/trunc.btf"
+check bonn-truncated 2 "$BTFC" info "$W/trunc.btf"
+expect_grep bonn-truncated-msg "trunc.btf" "$W/err.txt"
+
 # Usage errors: exit 1, nothing written.
 check unknown-param 1 "$BTFC" compress "$W/s.btfc" -c fmf:rnak=3 -o "$W/bad.btfc"
 expect_grep unknown-param-msg "unknown parameter 'rnak'" "$W/err.txt"

@@ -66,7 +66,16 @@ struct Block {
 struct Config {
   bool dfmf = false;
   bool half = true;
+  // Bonn colour model of a model made from a Bonn file (make_fmf_model), when it is not the
+  // mode's native one (dfmf: 11, rgb: 0); -1 = native. Non-native models decode on the CPU path
+  // only and cannot be saved to .btfc.
+  int color_model = -1;
+  float color_mean[3] = {0, 0, 0};
+  float color_transform[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
 };
+
+// Inverse of Bonn colour models other than 11 (BTFLIB undecorrelate.m, formats.md 2.2).
+void bonn_undecorrelate(const Config& cfg, const float* in, float* rgb);
 
 Config config_from(const Params& p) { return {p.get("color") == "dfmf", p.get("precision") == "half"}; }
 
@@ -80,6 +89,7 @@ class FmfModel final : public Model {
   const std::string& spec() const override { return m_spec; }
   ModelStats& mutable_stats() { return m_stats; }
   const std::vector<Block>& blocks() const { return m_blocks; }
+  const Config& config() const { return m_cfg; }
 
   void eval(int x, int y, int l, int v, float* out) const override {
     const Index t = Index(x) + Index(m_desc.width) * y;
@@ -87,6 +97,8 @@ class FmfModel final : public Model {
       const Block& b = m_blocks[0];
       for (int c = 0; c < m_desc.channels; ++c)
         out[c] = b.U.row(Index(m_desc.row(l, v, c))).dot(b.SxV.row(t));
+      if (m_cfg.color_model == 12)  // Bonn FMF dynamic range reduction
+        for (int c = 0; c < m_desc.channels; ++c) out[c] = std::exp(out[c]) - k_drr_eps;
       return;
     }
     const Index r = Index(l) + Index(m_desc.num_lights()) * v;
@@ -122,7 +134,8 @@ class FmfModel final : public Model {
   ModelStats stats() const override { return m_stats; }
 
  private:
-  static void undecorrelate(const float* ylog_u_v, float* rgb) {
+  void undecorrelate(const float* ylog_u_v, float* rgb) const {
+    if (m_cfg.color_model >= 0) return bonn_undecorrelate(m_cfg, ylog_u_v, rgb);
     const float y = std::exp(ylog_u_v[0]) - k_drr_eps;
     const float yuv[3] = {y, ylog_u_v[1] * (y + k_drr_eps), ylog_u_v[2] * (y + k_drr_eps)};
     for (int c = 0; c < 3; ++c)
@@ -183,7 +196,7 @@ Status FmfModel::decode_cl(const ResolvedRequest& rr, Btf& out) const {
 }
 
 Status FmfModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
-  if (m_desc.channels != 3 || !ocl::use_opencl()) return Model::eval_batch(q, out);
+  if (m_desc.channels != 3 || m_cfg.color_model >= 0 || !ocl::use_opencl()) return Model::eval_batch(q, out);
   // Validate through the reference path's checks, then convert to the kernel's query layout:
   // directions become 3 + 3 (index, weight) pairs (the renderer's index / weight textures).
   std::vector<btfc_fmf_query> kq(q.size());
@@ -214,7 +227,7 @@ Status FmfModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
 Status FmfModel::decode(const DecodeRequest& req, Btf& out) const {
   BTFC_ASSIGN_OR_RETURN(ResolvedRequest rr, resolve_request(m_desc, req));
   BTFC_ASSIGN_OR_RETURN(out, Btf::create(rr.desc));
-  if (m_desc.channels == 3 && ocl::use_opencl()) {
+  if (m_desc.channels == 3 && m_cfg.color_model < 0 && ocl::use_opencl()) {
     Status s = decode_cl(rr, out);
     if (s.ok() || !ocl::fall_back_after(s)) return s;
   }
@@ -239,10 +252,14 @@ Status FmfModel::decode(const DecodeRequest& req, Btf& out) const {
       }
   }
   // Texel blocks bound the temporary memory; each block is one GEMM per factorized channel.
-  const Index tb = 4096;
+  // Texel tiles of at most ~16 M temporary floats per channel (64 MB), and buffers reused across
+  // tiles: fresh memory is slow to fault in on the VMs btfc runs on, and a 4096-texel tile of a
+  // UBO2014 per-channel model would need 1.1 GB of temporaries.
+  const Index tb = std::clamp<Index>((Index(16) << 20) / std::max<Index>(1, rows_per_block), 16, 4096);
+  std::vector<MatrixXfR> sx(nblocks);
+  MatrixXfR ch[3];
   for (Index t0 = 0; t0 < n; t0 += tb) {
     const Index nb = std::min(tb, n - t0);
-    std::vector<MatrixXfR> sx(nblocks);
     for (int k = 0; k < nblocks; ++k) {
       sx[k].resize(nb, m_blocks[k].SxV.cols());
       for (Index i = 0; i < nb; ++i) {
@@ -253,10 +270,13 @@ Status FmfModel::decode(const DecodeRequest& req, Btf& out) const {
     Eigen::Map<MatrixXfR> dst(out.data() + size_t(t0) * size_t(m), nb, m);
     if (!m_cfg.dfmf) {
       dst.noalias() = sx[0] * Usub[0].transpose();
+      if (m_cfg.color_model == 12) dst = (dst.array().exp() - k_drr_eps).matrix();  // Bonn FMF dynamic range reduction
       continue;
     }
-    MatrixXfR ch[3];
-    for (int k = 0; k < 3; ++k) ch[k].noalias() = sx[k] * Usub[k].transpose();
+    for (int k = 0; k < 3; ++k) {
+      ch[k].resize(nb, rows_per_block);  // no reallocation when the size is unchanged
+      ch[k].noalias() = sx[k] * Usub[k].transpose();
+    }
 #pragma omp parallel for schedule(static)
     for (Index i = 0; i < nb; ++i)
       for (Index r = 0; r < rows_per_block; ++r) {
@@ -268,6 +288,9 @@ Status FmfModel::decode(const DecodeRequest& req, Btf& out) const {
 }
 
 Status FmfModel::save(ContainerWriter& w) const {
+  if (m_cfg.color_model >= 0)
+    return unsupported("fmf: a model with Bonn colour model " + std::to_string(m_cfg.color_model) +
+                       " cannot be saved as .btfc (only 11 = color=dfmf and 0 = color=rgb); decompress and re-compress it instead");
   for (const Block& b : m_blocks) {
     const uint64_t rows = uint64_t(b.U.rows()), cols = uint64_t(b.U.cols()), texels = uint64_t(b.SxV.rows());
     MatrixXfR sxv_scaled = b.SxV * b.scale.cwiseInverse().asDiagonal();
@@ -437,6 +460,124 @@ class FmfCodec final : public Codec {
 const Codec& fmf_codec() {
   static const FmfCodec codec;
   return codec;
+}
+
+}  // namespace btfc
+
+// ---- Bonn DFMF / FMF files as fmf models (fmf.h; formats.md 2.2) ----
+namespace btfc {
+namespace {
+
+void bonn_undecorrelate(const Config& cfg, const float* in, float* rgb) {
+  // YCoCg -> RGB (BTFLIB undecorrelate.m, model 4).
+  static constexpr float k_rgb_from_ycocg[3][3] = {{1, 1, -1}, {1, 0, 1}, {1, -1, -1}};
+  auto mul = [&](const float (*M)[3], const float* v) {
+    for (int c = 0; c < 3; ++c) rgb[c] = M[c][0] * v[0] + M[c][1] * v[1] + M[c][2] * v[2];
+  };
+  switch (cfg.color_model) {
+    case 0:
+      for (int c = 0; c < 3; ++c) rgb[c] = in[c];
+      return;
+    case 1:
+      return mul(k_rgb_from_yuv, in);
+    case 3:  // PCA: row vector times T, plus the mean
+      for (int j = 0; j < 3; ++j)
+        rgb[j] = in[0] * cfg.color_transform[0][j] + in[1] * cfg.color_transform[1][j] + in[2] * cfg.color_transform[2][j] +
+                 cfg.color_mean[j];
+      return;
+    case 4:
+      return mul(k_rgb_from_ycocg, in);
+    case 9: {
+      const float yuv[3] = {std::exp(in[0]) - k_drr_eps, in[1], in[2]};
+      return mul(k_rgb_from_yuv, yuv);
+    }
+    case 10: {
+      // sign(v) * exp(|v| + log eps); sign(0) = 0 as in MATLAB.
+      auto unlog = [](float v) { return v == 0 ? 0.0f : std::copysign(k_drr_eps * std::exp(std::fabs(v)), v); };
+      const float yuv[3] = {std::exp(in[0]) - k_drr_eps, unlog(in[1]), unlog(in[2])};
+      return mul(k_rgb_from_yuv, yuv);
+    }
+    case 12:
+      for (int c = 0; c < 3; ++c) rgb[c] = std::exp(in[c]) - k_drr_eps;
+      return;
+    default:  // 11 never reaches here (native); make_fmf_model rejects the rest
+      for (int c = 0; c < 3; ++c) rgb[c] = 0;
+  }
+}
+
+}  // namespace
+
+Result<std::unique_ptr<Model>> make_fmf_model(const BtfDesc& desc, int cm, std::vector<FmfFactors> in,
+                                              const float color_mean[3], const float color_transform[3][3], bool half) {
+  BTFC_RETURN_IF_ERROR(desc.validate());
+  const bool per_channel = in.size() == 3;
+  if (in.size() != 1 && !per_channel)
+    return invalid_argument("fmf: a Bonn factorization needs 1 (rgb) or 3 (per channel) blocks, got " + std::to_string(in.size()));
+  if (per_channel && desc.channels != 3)
+    return unsupported("fmf: per-channel (DFMF) factorizations are supported for 3 channels only, this one has " +
+                       std::to_string(desc.channels));
+  const bool ok_model = per_channel ? (cm == 0 || cm == 1 || cm == 3 || cm == 4 || (cm >= 9 && cm <= 12)) : (cm == 0 || cm == 12);
+  if (!ok_model)
+    return unsupported("fmf: Bonn colour model " + std::to_string(cm) +
+                       (cm == 2 ? " (Lab)" : cm == 5 || cm == 6 ? " (spectral)" : "") + " is not supported" +
+                       (per_channel ? "" : " for an FMF (one rgb block)"));
+  Config cfg;
+  cfg.dfmf = per_channel;
+  cfg.half = half;
+  cfg.color_model = (per_channel && cm == 11) || (!per_channel && cm == 0) ? -1 : cm;
+  for (int i = 0; i < 3; ++i) {
+    cfg.color_mean[i] = color_mean ? color_mean[i] : 0.0f;
+    for (int j = 0; j < 3; ++j) cfg.color_transform[i][j] = color_transform ? color_transform[i][j] : float(i == j);
+  }
+  const size_t rows = per_channel ? desc.num_images() : desc.abrdf_size(), texels = desc.num_texels();
+  std::vector<Block> blocks;
+  for (FmfFactors& f : in) {
+    const std::string what = "fmf: block '" + f.name + "'";
+    if (f.C < 1 || f.C > 4096) return unsupported(what + " has " + std::to_string(f.C) + " components (1..4096 supported)");
+    const size_t C = size_t(f.C);
+    if (f.U.size() != rows * C || f.SxV.size() != texels * C || f.S.size() != C)
+      return invalid_argument(what + ": U, SxV or S size disagrees with " + std::to_string(rows) + " rows, " +
+                              std::to_string(texels) + " texels, " + std::to_string(C) + " components");
+    Block b;
+    b.name = f.name;
+    b.U = Eigen::Map<const MatrixXfR>(f.U.data(), Index(rows), Index(C));
+    std::vector<float>().swap(f.U);  // release as we go: peak memory = model + one block
+    b.SxV = Eigen::Map<const MatrixXfR>(f.SxV.data(), Index(texels), Index(C));
+    std::vector<float>().swap(f.SxV);
+    b.S = Eigen::Map<const Eigen::VectorXf>(f.S.data(), Index(C));
+    // The factors are stored exactly (no per-component scale): a half Bonn file saves to a
+    // half .btfc without a second rounding.
+    b.scale = Eigen::VectorXf::Ones(Index(C));
+    if (!b.U.allFinite() || !b.SxV.allFinite()) return corrupt_data(what + " holds non-finite values");
+    blocks.push_back(std::move(b));
+  }
+  std::string text = per_channel ? "rank=" + std::to_string(blocks[0].U.cols()) + ":chroma_rank=" +
+                                       std::to_string(std::max(blocks[1].U.cols(), blocks[2].U.cols())) + ":color=dfmf"
+                                 : "rank=" + std::to_string(blocks[0].U.cols()) + ":color=rgb";
+  text += half ? ":precision=half" : ":precision=float";
+  BTFC_ASSIGN_OR_RETURN(auto spec, parse_spec_string("fmf:" + text));
+  BTFC_ASSIGN_OR_RETURN(Params p, bind_params(spec, k_params));
+  auto model = std::make_unique<FmfModel>(desc, p.canonical(), cfg, std::move(blocks));
+  for (const Block& b : model->blocks()) model->mutable_stats().add("rank." + b.name, double(b.U.cols()));
+  model->mutable_stats().add("bonn_color_model", cm);
+  return std::unique_ptr<Model>(std::move(model));
+}
+
+Result<FmfFactorsView> fmf_factors(const Model& model) {
+  const auto* m = dynamic_cast<const FmfModel*>(&model);
+  if (!m) return invalid_argument(model.spec() + ": not an fmf model");
+  const Config& cfg = m->config();
+  FmfFactorsView v;
+  v.per_channel = cfg.dfmf;
+  v.bonn_color_model = cfg.color_model >= 0 ? cfg.color_model : (cfg.dfmf ? 11 : 0);
+  v.half = cfg.half;
+  for (int i = 0; i < 3; ++i) {
+    v.color_mean[i] = cfg.color_mean[i];
+    for (int j = 0; j < 3; ++j) v.color_transform[i][j] = cfg.color_transform[i][j];
+  }
+  for (const Block& b : m->blocks())
+    v.blocks.push_back({b.name, b.U.data(), b.SxV.data(), b.S.data(), size_t(b.U.rows()), size_t(b.SxV.rows()), int(b.U.cols())});
+  return v;
 }
 
 }  // namespace btfc

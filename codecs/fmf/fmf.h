@@ -25,10 +25,57 @@
 //   S.<b>     [C]         f32          singular values (informational, like Bonn's files)
 // Rows are (light fastest, then view; rgb: colour fastest) exactly as core/btf.h and Bonn FMF/DFMF.
 #pragma once
+#include <memory>
+#include <string>
+#include <vector>
+
 #include "codecs/codec.h"
 
 namespace btfc {
 
 const Codec& fmf_codec();
+
+// ---- Bonn DFMF / FMF files as fmf models (formats/bonn/bonn_btf.h, formats.md 2.2) ----
+//
+// A Bonn file already is a factorization, so it becomes an fmf model without re-encoding.
+// Per factorized block: U [rows x C] and SxV [texels x C], row-major, SxV = V * Sigma.
+struct FmfFactors {
+  std::string name;          // "rgb" (one block, rows = nC*nL*nV) or "y","u","v" (rows = nL*nV)
+  std::vector<float> U;      // rows x C, row-major
+  std::vector<float> SxV;    // texels x C, row-major
+  std::vector<float> S;      // C singular values (informational)
+  int C = 0;
+};
+
+// Bonn colour models (formats.md 2.2 table) the fmf decoder inverts. One "rgb" block:
+// 0 (plain) or 12 (value = exp(v) - 1e-5, FMF dynamic range reduction). Three per-channel
+// blocks (DFMF): 0, 1, 3, 4, 9, 10, 11, 12. Others (2 Lab, 5/6 spectral) answer unsupported.
+// `color_mean` / `color_transform` (row-major, rgb_j = sum_i v_i T[i][j] + mean_j) are used by
+// model 3 only. `half`: the precision used when the model is saved to .btfc.
+// The model's spec is the equivalent fmf spec ("fmf:color=dfmf:..." for 11, "color=rgb" for one
+// block with model 0), so it saves to .btfc; other colour models cannot be saved to .btfc
+// (save() answers unsupported) but decode, eval and re-compress normally.
+Result<std::unique_ptr<Model>> make_fmf_model(const BtfDesc& desc, int bonn_color_model, std::vector<FmfFactors> blocks,
+                                              const float color_mean[3], const float color_transform[3][3], bool half);
+
+// Read-only view of an fmf model's factors, valid while the model lives (for the Bonn writers).
+struct FmfBlockView {
+  std::string name;
+  const float* U = nullptr;    // rows x C row-major
+  const float* SxV = nullptr;  // texels x C row-major, dequantized (the values the model decodes)
+  const float* S = nullptr;    // C
+  size_t rows = 0, texels = 0;
+  int C = 0;
+};
+struct FmfFactorsView {
+  bool per_channel = false;  // true: blocks y,u,v (DFMF layout); false: one "rgb" block (FMF layout)
+  int bonn_color_model = 0;  // 11 for color=dfmf, 0 for color=rgb; as given to make_fmf_model otherwise
+  bool half = true;
+  float color_mean[3] = {0, 0, 0};
+  float color_transform[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  std::vector<FmfBlockView> blocks;
+};
+// invalid_argument when `model` is not an fmf model.
+Result<FmfFactorsView> fmf_factors(const Model& model);
 
 }  // namespace btfc
