@@ -61,6 +61,16 @@ Status Model::eval_batch(std::span<const EvalQuery> q, float* out) const {
   return {};
 }
 
+Status prepare_output(const BtfDesc& desc, Btf& out) {
+  if (out.size() == desc.num_values() && out.size() > 0) {
+    BTFC_RETURN_IF_ERROR(desc.validate());
+    out.reshape(desc);
+    return {};
+  }
+  BTFC_ASSIGN_OR_RETURN(out, Btf::create(desc));
+  return {};
+}
+
 Result<ResolvedRequest> resolve_request(const BtfDesc& src, const DecodeRequest& req) {
   ResolvedRequest r;
   r.x0 = req.x0;

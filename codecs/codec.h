@@ -56,7 +56,8 @@ class Model {
   virtual const std::string& spec() const = 0;  // canonical spec string it was made with
 
   // Decodes a region / direction subset into `out`, which this call (re)creates with the
-  // request's shape (subset direction sets, region size).
+  // request's shape (subset direction sets, region size); an `out` that already has that
+  // shape is reused without reallocation (block-wise decoding of large BTFs).
   virtual Status decode(const DecodeRequest& req, Btf& out) const = 0;
   // Value at a texel and a measured (light, view) index pair; `out` has desc().channels floats.
   virtual void eval(int x, int y, int light, int view, float* out) const = 0;
@@ -117,5 +118,8 @@ struct ResolvedRequest {
   std::vector<int> lights, views;  // source indices, one per output direction
 };
 Result<ResolvedRequest> resolve_request(const BtfDesc& src, const DecodeRequest& req);
+// Makes `out` a BTF of `desc`'s shape: reuses its storage when the value count matches (the
+// contents are then stale: the caller overwrites every value), else allocates zeroed storage.
+Status prepare_output(const BtfDesc& desc, Btf& out);
 
 }  // namespace btfc

@@ -124,6 +124,10 @@ class Btf {
   float* abrdf(size_t texel) { return m_data.data() + texel * m_desc.abrdf_size(); }
   ImageView image(size_t l, size_t v) const;
 
+  // Gives the storage a new description with the same value count (block-wise decoding reuses
+  // one buffer); the values are left as they are.
+  void reshape(const BtfDesc& d) { m_desc = d; }
+
   // First non-finite value as an error naming (x, y, light, view, channel), else ok.
   Status check_finite(const std::string& what) const;
 

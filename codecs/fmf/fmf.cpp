@@ -226,7 +226,7 @@ Status FmfModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
 
 Status FmfModel::decode(const DecodeRequest& req, Btf& out) const {
   BTFC_ASSIGN_OR_RETURN(ResolvedRequest rr, resolve_request(m_desc, req));
-  BTFC_ASSIGN_OR_RETURN(out, Btf::create(rr.desc));
+  BTFC_RETURN_IF_ERROR(prepare_output(rr.desc, out));
   if (m_desc.channels == 3 && m_cfg.color_model < 0 && ocl::use_opencl()) {
     Status s = decode_cl(rr, out);
     if (s.ok() || !ocl::fall_back_after(s)) return s;

@@ -118,7 +118,7 @@ Status LpcaModel::eval_dir(int x, int y, const Vec3& wl, const Vec3& wv, float* 
 
 Status LpcaModel::decode(const DecodeRequest& req, Btf& out) const {
   BTFC_ASSIGN_OR_RETURN(ResolvedRequest rr, resolve_request(m_desc, req));
-  BTFC_ASSIGN_OR_RETURN(out, Btf::create(rr.desc));
+  BTFC_RETURN_IF_ERROR(prepare_output(rr.desc, out));
   const int nc = m_desc.channels, c = m_cfg.components;
   const Index nl = Index(rr.lights.size()), nv = Index(rr.views.size()), m = Index(rr.desc.abrdf_size());
   const bool all_rows = m == Index(m_desc.abrdf_size());

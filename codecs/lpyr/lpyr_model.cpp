@@ -104,7 +104,7 @@ Status LpyrModel::eval_dir(int x, int y, const Vec3& wl, const Vec3& wv, float* 
 Status LpyrModel::decode(const DecodeRequest& req, Btf& out) const {
   BTFC_RETURN_IF_ERROR(check_lod(req.lod));
   BTFC_ASSIGN_OR_RETURN(ResolvedRequest rr, resolve_request(m_desc, req));
-  BTFC_ASSIGN_OR_RETURN(out, Btf::create(rr.desc));
+  BTFC_RETURN_IF_ERROR(prepare_output(rr.desc, out));
   const Index nl = Index(rr.lights.size()), nv = Index(rr.views.size()), dout = nl * nv;
   const Index w = rr.desc.width, n = Index(rr.desc.num_texels());
   const int k0 = int(std::floor(req.lod));

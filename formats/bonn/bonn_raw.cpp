@@ -59,7 +59,7 @@ class AbrdfModel : public Model {
 
   Status decode(const DecodeRequest& req, Btf& out) const override {
     BTFC_ASSIGN_OR_RETURN(ResolvedRequest rr, resolve_request(m_desc, req));
-    BTFC_ASSIGN_OR_RETURN(out, Btf::create(rr.desc));
+    BTFC_RETURN_IF_ERROR(prepare_output(rr.desc, out));
     const size_t n = rr.desc.num_texels(), w = size_t(rr.desc.width), nc = size_t(m_desc.channels);
     const size_t m = rr.desc.abrdf_size(), full = m_desc.abrdf_size();
     std::atomic<bool> failed{false};
