@@ -19,6 +19,7 @@
 
 #include "codecs/codec.h"
 #include "codecs/fmf/svd.h"
+#include "core/blas_env.h"
 #include "core/synth.h"
 
 using namespace btfc;
@@ -33,6 +34,7 @@ static double peak_rss_gb() {
 }
 
 int main(int argc, char** argv) {
+  reexec_for_openblas(argc, argv);
   int width = 256, height = 256, rank = 32, power = 4, over = 16;
   bool reference = false;
   std::string dump;

@@ -3,8 +3,10 @@
 #include <iostream>
 
 #include "cli/commands.h"
+#include "core/blas_env.h"
 
 int main(int argc, char** argv) {
+  btfc::reexec_for_openblas(argc, argv);
   using namespace btfc::cli;
   CLI::App app{"btfc - compression toolkit for Bidirectional Texture Functions"};
   app.require_subcommand(1);

@@ -6,8 +6,9 @@
 #include <limits>
 #include <numeric>
 #include <random>
+#include <omp.h>
 
-#include "codecs/fmf/svd.h"
+#include <Eigen/Dense>
 
 namespace btfc::lpca {
 namespace {
@@ -15,9 +16,17 @@ namespace {
 using Eigen::Index;
 using MapCF = Eigen::Map<const Eigen::MatrixXf>;  // the BTF as d x N, column-major (core/btf.h)
 
+using MatF = Eigen::MatrixXf;
+using MatD = Eigen::MatrixXd;
+using MapF = Eigen::Map<Eigen::MatrixXf>;
+
 constexpr int k_sketch_dim = 32;
-constexpr Index k_exact_svd_limit = 384;  // Gram side up to which the exact SVD is cheaper
+constexpr Index k_exact_svd_limit = 384;  // Gram side up to which the exact (Gram) PCA is used
 constexpr double k_move_margin = 1e-5;    // relative rounding margin of the float GEMM errors
+constexpr int k_oversample = 8;           // subspace width l = c + k_oversample (Halko et al.)
+constexpr int k_cold_power_iters = 2;     // subspace iterations from a random start
+constexpr int k_warm_power_iters = 1;     // ... from the previous basis (clusters change little)
+constexpr double k_rel_lambda_floor = 1e-12;  // (1e-6 sigma_max)^2: smaller components are float noise
 
 struct Cluster {
   Eigen::VectorXf mean;  // d
@@ -96,87 +105,181 @@ void seed_clusters(const MapCF& X, int K, uint64_t seed, std::vector<uint32_t>& 
   }
 }
 
-// PCA step for one cluster: new mean and basis, members' weights and squared errors; keeps the
-// old model when it reconstructs these members better.
-Status pca_step(const MapCF& X, const std::vector<Index>& members, int c, uint64_t seed, Cluster& cl, MatrixXfR& weights,
-                std::vector<double>& err) {
-  const Index d = X.rows(), n = Index(members.size());
-  Eigen::VectorXd acc = Eigen::VectorXd::Zero(d);
+// Buffers reused by every PCA step of the fit. Fresh large allocations are avoided on purpose:
+// first touch of new memory runs at ~300 MB/s on the VMs btfc runs on, which made page faults
+// ~15 % of the old per-cluster-temporaries encode. Eigen objects keep their storage when
+// resized to the same size; the gather buffer only grows.
+struct Workspace {
+  FloatBuffer xc;       // d x cap: the current cluster's members, centered (column-major)
+  Index cap = 0;
+  Eigen::VectorXd acc;  // d: mean accumulator
+  Eigen::VectorXf mean;
+  Eigen::VectorXd xc2;  // n: ||x - mean||^2
+  MatF QB;              // d x (l + c): subspace basis Q, then the previous basis E_old^T
+  MatF Z, Wt, G;        // n x l, n x (l + c), Gram
+  MatD Zd;              // orthonormalization scratch
+};
+
+// In-place orthonormal basis of the columns of Y: thin Householder QR in double (robust to
+// rank-deficient Y, e.g. all-zero clusters; Q stays orthonormal whatever Y is).
+void orthonormalize(Eigen::Ref<MatF> Y, MatD& scratch) {
+  scratch = Y.cast<double>();
+  Eigen::HouseholderQR<MatD> qr(scratch);
+  scratch = qr.householderQ() * MatD::Identity(Y.rows(), Y.cols());
+  Y = scratch.cast<float>();
+}
+
+// Top l eigenpairs (descending) of a symmetric matrix, in double.
+void top_eigen(const MatD& G, Index l, Eigen::VectorXd& lambda, MatD& vecs) {
+  Eigen::SelfAdjointEigenSolver<MatD> es(G);
+  const Index k = G.rows();
+  lambda.resize(l);
+  vecs.resize(k, l);
+  for (Index i = 0; i < l; ++i) {  // Eigen returns ascending order
+    lambda(i) = std::max(0.0, es.eigenvalues()(k - 1 - i));
+    vecs.col(i) = es.eigenvectors().col(k - 1 - i);
+  }
+}
+
+// PCA step for one cluster: new mean and basis, members' weights and squared errors.
+//  1. An l-dimensional subspace Q (l = c + oversample) close to the top principal subspace:
+//     exact from the float Gram matrix of the smaller side when that side is <= 384 (eigen-
+//     decomposed in double), else by subspace (power) iteration started from the previous
+//     basis plus random vectors (or random vectors only, for a new cluster).
+//  2. Rayleigh-Ritz: W = Xc^T Q, eigen-decomposition of W^T W in double -> the best rank-c
+//     basis within span(Q), orthonormal to float precision, with its weights.
+//  3. The previous basis, with the new mean, is scored in the same GEMM as W; it is kept when
+//     it reconstructs the members better. The new mean is optimal for any basis, so the step
+//     never increases the error, whether the subspace was exact or approximate.
+void pca_step(const MapCF& X, const Index* members, Index n, int c, const MatF& omega, Workspace& ws, Cluster& cl, MatrixXfR& weights,
+              std::vector<double>& err) {
+  const Index d = X.rows(), s = std::min(d, n), l = std::min<Index>(c + k_oversample, s);
+  // Mean in double, by row blocks so each thread owns its part of the accumulator.
+  ws.acc.setZero(d);
   const Index rb = 2048;
 #pragma omp parallel for schedule(dynamic)
   for (Index r0 = 0; r0 < d; r0 += rb) {
     const Index nr = std::min(rb, d - r0);
-    for (Index t : members) acc.segment(r0, nr) += X.col(t).segment(r0, nr).cast<double>();
+    for (Index i = 0; i < n; ++i) ws.acc.segment(r0, nr) += X.col(members[i]).segment(r0, nr).cast<double>();
   }
-  const Eigen::VectorXf mean = (acc / double(n)).cast<float>();
-  Eigen::MatrixXf Xc(d, n);
-  Eigen::VectorXd xc2(n);
+  ws.mean = (ws.acc / double(n)).cast<float>();
+  if (n > ws.cap) {
+    ws.cap = n + n / 8;
+    ws.xc = FloatBuffer();  // free first: peak memory stays one buffer
+    ws.xc = FloatBuffer(size_t(d) * size_t(ws.cap));
+  }
+  MapF Xc(ws.xc.data(), d, n);
+  ws.xc2.resize(n);
 #pragma omp parallel for schedule(static)
   for (Index i = 0; i < n; ++i) {
-    Xc.col(i) = X.col(members[size_t(i)]) - mean;
-    xc2(i) = Xc.col(i).cast<double>().squaredNorm();
+    Xc.col(i) = X.col(members[i]) - ws.mean;
+    ws.xc2(i) = Xc.col(i).cast<double>().squaredNorm();
   }
-  fmf::SvdOptions opt;
-  opt.max_rank = c;
-  opt.method = std::min(d, n) <= k_exact_svd_limit ? fmf::SvdMethod::exact : fmf::SvdMethod::randomized;
-  opt.oversample = 8;
-  opt.power_iters = 2;
-  opt.seed = seed;
-  BTFC_ASSIGN_OR_RETURN(fmf::SvdResult r, fmf::truncated_svd(Xc.data(), size_t(d), size_t(n), opt));
-  const Index kept = std::min<Index>(r.U.cols(), c);
+
+  // 1. The subspace Q = QB.leftCols(l).
+  const Index extra = cl.valid ? c : 0;
+  ws.QB.resize(d, l + extra);
+  auto Q = ws.QB.leftCols(l);
+  Eigen::VectorXd lambda;
+  MatD V;
+  if (s <= k_exact_svd_limit || l == s) {
+    if (n <= d) {  // texel side: G = Xc^T Xc, Q = orth(Xc V_l)
+      ws.G.noalias() = Xc.transpose() * Xc;
+      top_eigen(ws.G.cast<double>(), l, lambda, V);
+      Q.noalias() = Xc * V.cast<float>();
+      orthonormalize(Q, ws.Zd);
+    } else {  // direction side: G = Xc Xc^T, Q = its top eigenvectors
+      ws.G.noalias() = Xc * Xc.transpose();
+      top_eigen(ws.G.cast<double>(), l, lambda, V);
+      Q = V.cast<float>();
+    }
+  } else {
+    // Start: the previous basis and l - c random vectors (warm), or l random vectors (cold).
+    const Index keep = cl.valid ? std::min<Index>(c, l) : 0;
+    if (keep) Q.leftCols(keep) = cl.E.topRows(keep).transpose();
+    Q.rightCols(l - keep) = omega.leftCols(l - keep);
+    const int q = cl.valid ? k_warm_power_iters : k_cold_power_iters;
+    for (int it = 0; it < q; ++it) {
+      ws.Z.noalias() = Xc.transpose() * Q;  // n x l
+      orthonormalize(ws.Z, ws.Zd);
+      Q.noalias() = Xc * ws.Z;  // d x l
+      orthonormalize(Q, ws.Zd);
+    }
+  }
+  if (extra) ws.QB.rightCols(c) = cl.E.transpose();
+
+  // 2. Rayleigh-Ritz on span(Q), scoring the previous basis in the same pass over Xc.
+  ws.Wt.noalias() = Xc.transpose() * ws.QB;  // n x (l + extra)
+  const MatD Wd = ws.Wt.leftCols(l).cast<double>();
+  top_eigen(Wd.transpose() * Wd, l, lambda, V);
+  Index kept = 0;  // components above the float-noise floor; the rest stay zero
+  while (kept < std::min<Index>(c, l) && lambda(kept) > 0 && lambda(kept) > k_rel_lambda_floor * lambda(0)) ++kept;
   MatrixXfR E = MatrixXfR::Zero(c, d), W = MatrixXfR::Zero(n, c);
-  E.topRows(kept) = r.U.leftCols(kept).transpose();
-  W.leftCols(kept) = r.SxV.leftCols(kept);
-  if (!E.allFinite() || !W.allFinite()) {  // defensive: never let a degenerate SVD poison the model
+  if (kept) {
+    E.topRows(kept).noalias() = (Q * V.leftCols(kept).cast<float>()).transpose();
+    W.leftCols(kept) = (Wd * V.leftCols(kept)).cast<float>();
+  }
+  if (!E.allFinite() || !W.allFinite()) {  // defensive: never let a degenerate step poison the model
     E.setZero();
     W.setZero();
   }
-  std::vector<double> e_new(static_cast<size_t>(n));
+  // Sums in a fixed order (no floating-point OpenMP reduction): determinism by seed.
   double sum_new = 0, sum_old = 0;
-  for (Index i = 0; i < n; ++i) sum_new += e_new[size_t(i)] = std::max(0.0, xc2(i) - W.row(i).cast<double>().squaredNorm());
-  if (cl.valid) {
-    Xc.colwise() += mean - cl.mean;  // now centered at the old mean
-    MatrixXfR Wo(n, c);
-    Wo.noalias() = Xc.transpose() * cl.E.transpose();
-    std::vector<double> e_old(static_cast<size_t>(n));
-#pragma omp parallel for schedule(static)
-    for (Index i = 0; i < n; ++i)
-      e_old[size_t(i)] = std::max(0.0, Xc.col(i).cast<double>().squaredNorm() - Wo.row(i).cast<double>().squaredNorm());
-    for (double e : e_old) sum_old += e;
-    if (sum_old < sum_new) {
-      for (Index i = 0; i < n; ++i) weights.row(members[size_t(i)]) = Wo.row(i), err[size_t(members[size_t(i)])] = e_old[size_t(i)];
-      return {};
+  for (Index i = 0; i < n; ++i) sum_new += std::max(0.0, ws.xc2(i) - W.row(i).cast<double>().squaredNorm());
+  if (extra) {
+    for (Index i = 0; i < n; ++i) sum_old += std::max(0.0, ws.xc2(i) - ws.Wt.row(i).tail(c).cast<double>().squaredNorm());
+    if (sum_old < sum_new) {  // 3. keep the previous basis (with the better, new mean)
+      cl.mean = ws.mean;
+      for (Index i = 0; i < n; ++i) {
+        weights.row(members[i]) = ws.Wt.row(i).tail(c);
+        err[size_t(members[i])] = std::max(0.0, ws.xc2(i) - ws.Wt.row(i).tail(c).cast<double>().squaredNorm());
+      }
+      return;
     }
   }
-  cl.mean = mean;
+  cl.mean = ws.mean;
   cl.E = std::move(E);
   cl.valid = true;
-  for (Index i = 0; i < n; ++i) weights.row(members[size_t(i)]) = W.row(i), err[size_t(members[size_t(i)])] = e_new[size_t(i)];
-  return {};
+  for (Index i = 0; i < n; ++i) {
+    weights.row(members[i]) = W.row(i);
+    err[size_t(members[i])] = std::max(0.0, ws.xc2(i) - W.row(i).cast<double>().squaredNorm());
+  }
 }
+
+// Assignment buffers, reused across iterations (see Workspace).
+struct AssignBuffers {
+  MatF Wm;  // d x K(c+1): [mu_k E_k^T] of all clusters
+  std::vector<MatrixXfR> P;  // per thread: texel block x K(c+1), one texel's projections contiguous
+};
 
 // Assignment step; returns the number of texels moved and fills `err` with the estimated
 // error of each texel in its (new) cluster.
 int assign_step(const MapCF& X, const std::vector<Cluster>& cls, int c, const std::vector<double>& x2,
-                std::vector<uint32_t>& assign, std::vector<double>& err) {
+                std::vector<uint32_t>& assign, std::vector<double>& err, AssignBuffers& ab) {
   const Index d = X.rows(), N = X.cols(), K = Index(cls.size()), cols = c + 1;
-  Eigen::MatrixXf Wm = Eigen::MatrixXf::Zero(d, K * cols);
+  ab.Wm.resize(d, K * cols);
+  ab.Wm.setZero();
   Eigen::MatrixXd muE = Eigen::MatrixXd::Zero(K, c);
   std::vector<double> mu2(size_t(K), 0);
   for (Index k = 0; k < K; ++k) {
     if (!cls[size_t(k)].valid) continue;
-    Wm.col(k * cols) = cls[size_t(k)].mean;
-    Wm.middleCols(k * cols + 1, c) = cls[size_t(k)].E.transpose();
+    ab.Wm.col(k * cols) = cls[size_t(k)].mean;
+    ab.Wm.middleCols(k * cols + 1, c) = cls[size_t(k)].E.transpose();
     mu2[size_t(k)] = cls[size_t(k)].mean.cast<double>().squaredNorm();
     for (int i = 0; i < c; ++i) muE(k, i) = cls[size_t(k)].E.row(i).cast<double>().dot(cls[size_t(k)].mean.cast<double>());
   }
+  // Texel blocks in parallel, each block's GEMM single-threaded (Eigen does not nest inside an
+  // OpenMP region): one fork/join per step instead of Eigen's fine-grained GEMM synchronisation,
+  // which ran 3-15x slower than one thread when the 2-core machine was shared.
   int moved = 0;
-  const Index tb = 2048;
-  Eigen::MatrixXf P;
+  const Index tb = 512;
+  ab.P.resize(size_t(omp_get_max_threads()));
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : moved)
   for (Index t0 = 0; t0 < N; t0 += tb) {
     const Index nb = std::min(tb, N - t0);
-    P.noalias() = X.middleCols(t0, nb).transpose() * Wm;  // nb x K(c+1), Eigen-parallel
-#pragma omp parallel for schedule(static) reduction(+ : moved)
+    MatrixXfR& P = ab.P[size_t(omp_get_thread_num())];
+    P.resize(tb, K * cols);
+    P.topRows(nb).noalias() = X.middleCols(t0, nb).transpose() * ab.Wm;  // nb x K(c+1)
     for (Index i = 0; i < nb; ++i) {
       const size_t t = size_t(t0 + i);
       const uint32_t cur = assign[t];
@@ -227,22 +330,48 @@ Result<FitResult> fit_local_pca(const Btf& btf, const FitOptions& opt) {
 
   std::vector<Cluster> cls(static_cast<size_t>(K));
   MatrixXfR weights = MatrixXfR::Zero(N, c);
+  std::vector<Workspace> ws(static_cast<size_t>(omp_get_max_threads()));
+  MatF omega;
+  AssignBuffers ab;
+  std::vector<Index> order(static_cast<size_t>(N));  // texels sorted by cluster (counting sort)
+  std::vector<Index> start(size_t(K) + 1);
+  const Index l_max = std::min<Index>(c + k_oversample, d);
   if (opt.progress) opt.progress->start("lpca clustering", uint64_t(opt.iters));
   for (int it = 0; it < opt.iters; ++it) {
-    std::vector<std::vector<Index>> members(static_cast<size_t>(K));
-    for (Index t = 0; t < N; ++t) members[assign[size_t(t)]].push_back(t);
+    std::fill(start.begin(), start.end(), 0);
+    for (Index t = 0; t < N; ++t) ++start[assign[size_t(t)] + 1];
+    for (int k = 0; k < K; ++k) start[size_t(k) + 1] += start[size_t(k)];
+    {
+      std::vector<Index> pos(start.begin(), start.end() - 1);
+      for (Index t = 0; t < N; ++t) order[size_t(pos[assign[size_t(t)]]++)] = t;
+    }
+    // Gaussian start vectors of this iteration's subspace iterations (deterministic by seed).
+    std::mt19937_64 rng(opt.seed * 1000003ull + uint64_t(it) * 4099u);
+    std::normal_distribution<float> gauss(0, 1);
+    omega.resize(d, l_max);
+    for (Index i = 0; i < omega.size(); ++i) omega.data()[i] = gauss(rng);
+    // Clusters in parallel, largest first, each on its own workspace with single-threaded Eigen
+    // inside (see assign_step). With fewer clusters than 2 x threads, one at a time with
+    // Eigen's own threading instead. Results do not depend on which thread ran a cluster.
+    std::vector<int> by_size;
     for (int k = 0; k < K; ++k) {
-      if (members[size_t(k)].empty()) {
-        cls[size_t(k)].valid = false;  // only when there are fewer texels than clusters
-        continue;
-      }
-      BTFC_RETURN_IF_ERROR(pca_step(X, members[size_t(k)], c, opt.seed * 1000003ull + uint64_t(it) * 4099u + uint64_t(k),
-                                    cls[size_t(k)], weights, err));
+      if (start[size_t(k) + 1] == start[size_t(k)]) cls[size_t(k)].valid = false;  // only when texels < clusters
+      else by_size.push_back(k);
+    }
+    std::stable_sort(by_size.begin(), by_size.end(), [&](int a, int b) {
+      return start[size_t(a) + 1] - start[size_t(a)] > start[size_t(b) + 1] - start[size_t(b)];
+    });
+    const bool outer = by_size.size() >= 2 * ws.size();
+#pragma omp parallel for schedule(dynamic, 1) if (outer)
+    for (size_t j = 0; j < by_size.size(); ++j) {
+      const int k = by_size[j];
+      pca_step(X, order.data() + start[size_t(k)], start[size_t(k) + 1] - start[size_t(k)], c, omega,
+               ws[size_t(omp_get_thread_num())], cls[size_t(k)], weights, err);
     }
     res.sq_error.push_back(std::accumulate(err.begin(), err.end(), 0.0));
     if (opt.progress) opt.progress->advance();
     if (it + 1 == opt.iters) break;
-    int moved = assign_step(X, cls, c, x2, assign, err);
+    int moved = assign_step(X, cls, c, x2, assign, err, ab);
     moved += reseed_empty(assign, err, K, res.reseeded);
     res.changes.push_back(moved);
     if (moved == 0) {

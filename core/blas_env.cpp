@@ -1,0 +1,23 @@
+#include "core/blas_env.h"
+
+#include <unistd.h>
+
+#include <cstdlib>
+
+namespace btfc {
+
+void reexec_for_openblas(int argc, char** argv) {
+#if defined(BTFC_HAVE_OPENBLAS) && defined(__x86_64__)
+  if (std::getenv("OPENBLAS_CORETYPE")) return;  // the user's choice (or our own re-exec)
+  __builtin_cpu_init();
+  if (!__builtin_cpu_supports("avx512f") || !__builtin_cpu_supports("avx512dq") || !__builtin_cpu_supports("avx512bw") ||
+      !__builtin_cpu_supports("avx512vl"))
+    return;
+  setenv("OPENBLAS_CORETYPE", "SkylakeX", 1);
+  execv("/proc/self/exe", argv);  // only returns on failure: then carry on with the default kernels
+#endif
+  (void)argc;
+  (void)argv;
+}
+
+}  // namespace btfc
