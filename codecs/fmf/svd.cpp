@@ -22,17 +22,8 @@ namespace {
 
 constexpr double k_rel_sigma_floor = 1e-6;  // float data: smaller singular values are noise
 
-// Eigen-decomposition of a symmetric PSD matrix, eigenpairs sorted by descending eigenvalue.
-void sorted_eigen(const MatrixXd& G, Eigen::VectorXd& lambda, MatrixXd& vecs) {
-  Eigen::SelfAdjointEigenSolver<MatrixXd> es(G);
-  const Index k = G.rows();
-  lambda.resize(k);
-  vecs.resize(k, k);
-  for (Index i = 0; i < k; ++i) {  // Eigen returns ascending order
-    lambda(i) = std::max(0.0, es.eigenvalues()(k - 1 - i));
-    vecs.col(i) = es.eigenvectors().col(k - 1 - i);
-  }
-}
+// All eigenpairs, sorted by descending eigenvalue.
+void sorted_eigen(const MatrixXd& G, Eigen::VectorXd& lambda, MatrixXd& vecs) { top_eigenpairs(G, G.rows(), lambda, vecs); }
 
 double frobenius2(ConstMapF& B) {
   double total = 0;
@@ -175,6 +166,17 @@ Result<SvdResult> randomized_svd(ConstMapF& B, const SvdOptions& opt) {
 }
 
 }  // namespace
+
+void top_eigenpairs(const MatrixXd& G, Index l, Eigen::VectorXd& lambda, MatrixXd& vecs) {
+  Eigen::SelfAdjointEigenSolver<MatrixXd> es(G);
+  const Index k = G.rows();
+  lambda.resize(l);
+  vecs.resize(k, l);
+  for (Index i = 0; i < l; ++i) {  // Eigen returns ascending order
+    lambda(i) = std::max(0.0, es.eigenvalues()(k - 1 - i));
+    vecs.col(i) = es.eigenvectors().col(k - 1 - i);
+  }
+}
 
 Result<SvdResult> truncated_svd(const float* B, size_t m, size_t n, const SvdOptions& opt) {
   if (m == 0 || n == 0) return invalid_argument("SVD of an empty matrix");

@@ -53,6 +53,10 @@ struct SvdResult {
   double rel_error_estimate() const;
 };
 
+// The top `l` eigenpairs (eigenvalues descending, clamped at 0) of a symmetric PSD matrix, in
+// double; l <= G.rows(). Shared by the exact SVD path and lpca's per-cluster PCA.
+void top_eigenpairs(const Eigen::MatrixXd& G, Eigen::Index l, Eigen::VectorXd& lambda, Eigen::MatrixXd& vecs);
+
 // B is column-major with leading dimension m. Fails on m == 0 or n == 0.
 Result<SvdResult> truncated_svd(const float* B, size_t m, size_t n, const SvdOptions& opt);
 

@@ -10,6 +10,8 @@
 
 #include <Eigen/Dense>
 
+#include "codecs/fmf/svd.h"
+
 namespace btfc::lpca {
 namespace {
 
@@ -129,17 +131,7 @@ void orthonormalize(Eigen::Ref<MatF> Y, MatD& scratch) {
   Y = scratch.cast<float>();
 }
 
-// Top l eigenpairs (descending) of a symmetric matrix, in double.
-void top_eigen(const MatD& G, Index l, Eigen::VectorXd& lambda, MatD& vecs) {
-  Eigen::SelfAdjointEigenSolver<MatD> es(G);
-  const Index k = G.rows();
-  lambda.resize(l);
-  vecs.resize(k, l);
-  for (Index i = 0; i < l; ++i) {  // Eigen returns ascending order
-    lambda(i) = std::max(0.0, es.eigenvalues()(k - 1 - i));
-    vecs.col(i) = es.eigenvectors().col(k - 1 - i);
-  }
-}
+using fmf::top_eigenpairs;
 
 // PCA step for one cluster: new mean and basis, members' weights and squared errors.
 //  1. An l-dimensional subspace Q (l = c + oversample) close to the top principal subspace:
@@ -185,12 +177,12 @@ void pca_step(const MapCF& X, const Index* members, Index n, int c, const MatF& 
   if (s <= k_exact_svd_limit || l == s) {
     if (n <= d) {  // texel side: G = Xc^T Xc, Q = orth(Xc V_l)
       ws.G.noalias() = Xc.transpose() * Xc;
-      top_eigen(ws.G.cast<double>(), l, lambda, V);
+      top_eigenpairs(ws.G.cast<double>(), l, lambda, V);
       Q.noalias() = Xc * V.cast<float>();
       orthonormalize(Q, ws.Zd);
     } else {  // direction side: G = Xc Xc^T, Q = its top eigenvectors
       ws.G.noalias() = Xc * Xc.transpose();
-      top_eigen(ws.G.cast<double>(), l, lambda, V);
+      top_eigenpairs(ws.G.cast<double>(), l, lambda, V);
       Q = V.cast<float>();
     }
   } else {
@@ -211,7 +203,7 @@ void pca_step(const MapCF& X, const Index* members, Index n, int c, const MatF& 
   // 2. Rayleigh-Ritz on span(Q), scoring the previous basis in the same pass over Xc.
   ws.Wt.noalias() = Xc.transpose() * ws.QB;  // n x (l + extra)
   const MatD Wd = ws.Wt.leftCols(l).cast<double>();
-  top_eigen(Wd.transpose() * Wd, l, lambda, V);
+  top_eigenpairs(Wd.transpose() * Wd, l, lambda, V);
   Index kept = 0;  // components above the float-noise floor; the rest stay zero
   while (kept < std::min<Index>(c, l) && lambda(kept) > 0 && lambda(kept) > k_rel_lambda_floor * lambda(0)) ++kept;
   MatrixXfR E = MatrixXfR::Zero(c, d), W = MatrixXfR::Zero(n, c);
