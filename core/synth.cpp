@@ -178,7 +178,9 @@ Result<Btf> synthesize_btf(const SynthOptions& opt) {
   BtfDesc desc;
   desc.width = opt.width, desc.height = opt.height, desc.channels = 3;
   desc.lights = opt.lights, desc.views = opt.views;
-  desc.hdr = opt.scale > 1.0f;  // beyond [0, 1]: PSNR must use the data peak
+  // Any rescaled output is linear float data, not [0, 1] display data: PSNR and SSIM must use
+  // the data peak (at scale 1e-6 a peak of 1 would report 149 dB and SSIM 1.0).
+  desc.hdr = opt.scale != 1.0f;
   BTFC_ASSIGN_OR_RETURN(Btf btf, Btf::create(desc));  // validates sizes and directions
 
   Rng rng(opt.seed);
