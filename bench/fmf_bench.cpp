@@ -9,6 +9,7 @@
 //
 //   bench_fmf [--width 256] [--height 256] [--rank 32] [--power-iters 4] [--oversample 16]
 //             [--reference] [--dump FILE]   (FILE: raw float32 matrix for scripts/bench_sklearn.py)
+//             [--codec SPEC]  (time another codec's encode on the same input instead, e.g. lpyr)
 #include <sys/resource.h>
 
 #include <chrono>
@@ -37,7 +38,7 @@ int main(int argc, char** argv) {
   reexec_for_openblas(argc, argv);
   int width = 256, height = 256, rank = 32, power = 4, over = 16;
   bool reference = false;
-  std::string dump;
+  std::string dump, codec_spec;
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
     auto next = [&] { return i + 1 < argc ? std::atoi(argv[++i]) : 0; };
@@ -48,6 +49,7 @@ int main(int argc, char** argv) {
     else if (a == "--oversample") over = next();
     else if (a == "--reference") reference = true;
     else if (a == "--dump" && i + 1 < argc) dump = argv[++i];
+    else if (a == "--codec" && i + 1 < argc) codec_spec = argv[++i];
     else {
       std::fprintf(stderr, "unknown argument %s\n", a.c_str());
       return 1;
@@ -75,6 +77,19 @@ int main(int argc, char** argv) {
                 d.num_texels(), dump.c_str());
   }
 
+  if (!codec_spec.empty()) {
+    auto spec = resolve_spec(codec_spec);
+    if (!spec.ok()) return 1;
+    Context ctx;
+    t0 = now_s();
+    auto model = spec->first->encode(btf.value(), spec->second, ctx);
+    if (!model.ok()) return 3;
+    const double enc = now_s() - t0;
+    std::printf("codec      %s: encode %.2f s, payload %.1f MB (ratio %.0f : 1 vs float32), peak RSS %.2f GB (%.2f x input)\n",
+                model.value()->spec().c_str(), enc, double(model.value()->payload_bytes()) / 1e6,
+                double(d.num_values()) * 4 / double(model.value()->payload_bytes()), peak_rss_gb(), peak_rss_gb() / input_gb);
+    return 0;
+  }
   auto run = [&](int q, int p, const char* label) {
     fmf::SvdOptions opt;
     opt.max_rank = rank, opt.power_iters = q, opt.oversample = p, opt.method = fmf::SvdMethod::randomized;
