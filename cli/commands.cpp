@@ -11,6 +11,7 @@
 
 #include "codecs/codec.h"
 #include "codecs/lpca/lpca.h"
+#include "codecs/target.h"
 #include "core/cl_runtime.h"
 #include "core/container.h"
 #include "core/metrics.h"
@@ -42,6 +43,15 @@ int fail(const Global& g, const Status& s) {
   return exit_code(s);
 }
 
+Result<Vec3> parse_theta_phi(const std::string& text, const char* what) {
+  double th = 0, ph = 0;
+  char extra = 0;
+  if (std::sscanf(text.c_str(), "%lf,%lf%c", &th, &ph, &extra) != 2 || !std::isfinite(th) || !std::isfinite(ph) || th < 0 || th > 180)
+    return invalid_argument(std::string(what) + ": expected THETA,PHI in degrees (theta in [0, 180]), got '" + text + "'");
+  const double k = 3.14159265358979323846 / 180.0;
+  return dir_from_theta_phi(th * k, ph * k);
+}
+
 namespace {
 
 bool ends_with(const std::string& s, const std::string& suffix) {
@@ -64,15 +74,6 @@ Result<std::vector<int>> parse_ints(const std::string& text, const char* what) {
     out.push_back(int(v));
   }
   return out;
-}
-
-Result<Vec3> parse_theta_phi(const std::string& text, const char* what) {
-  double th = 0, ph = 0;
-  char extra = 0;
-  if (std::sscanf(text.c_str(), "%lf,%lf%c", &th, &ph, &extra) != 2 || !std::isfinite(th) || !std::isfinite(ph) || th < 0 || th > 180)
-    return invalid_argument(std::string(what) + ": expected THETA,PHI in degrees (theta in [0, 180]), got '" + text + "'");
-  const double k = 3.14159265358979323846 / 180.0;
-  return dir_from_theta_phi(th * k, ph * k);
 }
 
 Result<DirectionSet> parse_direction_set(const std::string& text, const char* what) {
@@ -259,7 +260,27 @@ int cmd_compress(const Global& g, const CompressArgs& a) {
   ctx.seed = a.seed;
   ctx.progress = &progress;
   t0 = Clock::now();
-  auto model = codec->encode(btf.value(), params, ctx);
+  json target_json;
+  Result<std::unique_ptr<Model>> model = unsupported("compress: no model");
+  if (a.target_psnr || a.target_ssim || a.max_bytes) {
+    Target t;
+    t.kind = a.target_psnr ? Target::Kind::psnr : a.target_ssim ? Target::Kind::ssim : Target::Kind::max_bytes;
+    t.value = a.target_psnr ? *a.target_psnr : a.target_ssim ? *a.target_ssim : *a.max_bytes;
+    auto choice = choose_for_target(btf.value(), a.spec, t, ctx);
+    if (!choice.ok()) return fail(g, choice.status().with_context(a.in));
+    TargetChoice& c = choice.value();
+    target_json = {{"knob", c.knob}, {"value", c.knob_value}, {"reached", num(c.measure)}, {"probes", json::array()}};
+    for (const TargetProbe& p : c.probes)
+      target_json["probes"].push_back({{"knob", p.knob}, {"measure", num(p.measure)}, {"meets", p.meets}});
+    if (!g.json && !g.quiet) {
+      std::cout << "target: chose " << c.knob << " = " << c.knob_value << " (reached " << c.measure << "); probes:";
+      for (const TargetProbe& p : c.probes) std::cout << " " << p.knob << (p.meets ? "+" : "-") << "(" << p.measure << ")";
+      std::cout << "\n";
+    }
+    model = std::move(c.model);
+  } else {
+    model = codec->encode(btf.value(), params, ctx);
+  }
   if (!model.ok()) return fail(g, model.status().with_context(a.in));
   const double enc_s = seconds_since(t0);
   Status s = ends_with(a.out, ".btf") ? write_bonn(*model.value(), a.out, params.get("precision") == "half")
@@ -272,6 +293,7 @@ int cmd_compress(const Global& g, const CompressArgs& a) {
     json st;
     print_stats(model.value()->stats(), &st);
     j["stats"] = st;
+    if (!target_json.is_null()) j["target"] = target_json;
     std::cout << j.dump(2) << "\n";
   } else if (!g.quiet) {
     std::cout << "compressed " << a.in << " (" << btf->desc().summary() << ") with " << model.value()->spec() << "\n"
@@ -413,45 +435,6 @@ int cmd_convert(const Global& g, const ConvertArgs& a) {
   if (!s.ok()) return fail(g, s);
   if (g.json) std::cout << json{{"input", a.in}, {"output", a.out}}.dump(2) << "\n";
   else if (!g.quiet) std::cout << "converted " << a.in << " -> " << a.out << "\n";
-  return 0;
-}
-
-int cmd_bench(const Global& g, const BenchArgs& a) {
-  auto btf = read_btf(a.in);
-  if (!btf.ok()) return fail(g, btf.status());
-  const std::string label = a.label.empty() ? a.in : a.label;
-  json rows = json::array();
-  if (!g.json && a.header)
-    std::printf("%-18s %-30s %9s %10s %9s %8s %9s %9s\n", "data", "codec (as given)", "ratio", "RMSE", "PSNR", "SSIM", "enc s", "dec s");
-  for (const std::string& spec : a.specs) {
-    auto resolved = resolve_spec(spec);
-    if (!resolved.ok()) return fail(g, resolved.status());
-    auto [codec, params] = std::move(resolved).value();
-    Progress progress(g.quiet || g.json);
-    Context ctx;
-    ctx.seed = a.seed;
-    ctx.progress = &progress;
-    auto t0 = Clock::now();
-    auto model = codec->encode(btf.value(), params, ctx);
-    if (!model.ok()) return fail(g, model.status().with_context(a.in));
-    const double enc_s = seconds_since(t0);
-    t0 = Clock::now();
-    Btf out;
-    Status s = model.value()->decode_all(out);
-    if (!s.ok()) return fail(g, s);
-    const double dec_s = seconds_since(t0);
-    auto m = compare_btf(btf.value(), out, true);
-    if (!m.ok()) return fail(g, m.status());
-    const double ratio = double(btf->desc().num_values()) * 4.0 / double(model.value()->payload_bytes());
-    rows.push_back({{"data", label}, {"spec", model.value()->spec()}, {"spec_given", spec}, {"ratio", ratio}, {"payload_bytes", model.value()->payload_bytes()},
-                    {"rmse", m->rmse}, {"rel_l2", num(m->rel_l2)}, {"psnr", num(m->psnr)}, {"mean_ssim", m->mean_ssim},
-                    {"encode_seconds", enc_s}, {"decode_seconds", dec_s}, {"device", ocl::device_summary()}});
-    if (!g.json)
-      std::printf("%-18s %-30s %9.2f %10.4g %9.3f %8.5f %9.3f %9.3f\n", label.c_str(), spec.c_str(), ratio,
-                  m->rmse, m->psnr, m->mean_ssim, enc_s, dec_s);
-  }
-  if (g.json) std::cout << rows.dump(2) << "\n";
-  else std::printf("kernels ran on %s\n", ocl::device_summary().c_str());
   return 0;
 }
 

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "core/btf.h"
 #include "core/status.h"
 
 namespace btfc::cli {
@@ -13,9 +14,12 @@ namespace btfc::cli {
 struct Global {
   bool json = false;
   bool quiet = false;
+  std::string command_line;  // as typed, recorded in benchmark reports
 };
 
 int exit_code(const Status& s);
+// "THETA,PHI" in degrees -> a unit direction; `what` names the option in the error.
+Result<Vec3> parse_theta_phi(const std::string& text, const char* what);
 int fail(const Global& g, const Status& s);  // prints "error: ..." (or JSON) and returns exit_code
 
 struct SynthArgs {
@@ -30,6 +34,8 @@ struct SynthArgs {
 struct CompressArgs {
   std::string in, out, spec;
   unsigned long long seed = 1;
+  // Budget targeting (codecs/target.h): at most one; the codec's quality knob is searched.
+  std::optional<double> target_psnr, target_ssim, max_bytes;
 };
 
 struct DecompressArgs {
@@ -65,10 +71,27 @@ struct CompareArgs {
 
 struct BenchArgs {
   std::string in;
-  std::vector<std::string> specs;
+  std::vector<std::string> specs;  // each may be a sweep: fmf:rank=4,8,16
   std::string label;
   bool header = true;
   unsigned long long seed = 1;
+  std::string csv, json_out;       // files (csv: appended to with --append)
+  bool append = false;
+  std::string renders_dir;         // side-by-side PNGs per run and scene
+  bool pareto = false;
+  bool no_renders = false;
+  size_t throughput_queries = size_t(1) << 17;
+};
+
+struct RenderArgs {
+  std::string in, out;
+  std::string shape = "flat";      // flat | sphere
+  std::string view = "0,0";        // THETA,PHI degrees
+  std::string light = "30,0";      // THETA,PHI degrees (directional / point)
+  double distance = 0;             // > 0: point light at this distance
+  std::string env;                 // lat-long EXR: environment lighting
+  double intensity = 1;
+  int size = 256, tiles = 1;
 };
 
 // Applies --device (auto | cpu | cl) to the process (core/cl_runtime.h).
@@ -85,5 +108,6 @@ int cmd_compare(const Global& g, const CompareArgs& a);
 int cmd_relight(const Global& g, const RelightArgs& a);
 int cmd_convert(const Global& g, const ConvertArgs& a);
 int cmd_bench(const Global& g, const BenchArgs& a);
+int cmd_render(const Global& g, const RenderArgs& a);
 
 }  // namespace btfc::cli

@@ -11,6 +11,7 @@ int main(int argc, char** argv) {
   CLI::App app{"btfc - compression toolkit for Bidirectional Texture Functions"};
   app.require_subcommand(1);
   Global g;
+  for (int i = 0; i < argc; ++i) g.command_line += (i ? " " : "") + std::string(argv[i]);
   app.add_flag("--json", g.json, "machine-readable JSON output on stdout");
   app.add_flag("-q,--quiet", g.quiet, "no progress bar or chatter");
   std::string device = "auto";
@@ -53,6 +54,11 @@ int main(int argc, char** argv) {
   compress->add_option("-c,--codec", ca.spec, "codec spec string, e.g. fmf:rank=32:precision=half")->required();
   compress->add_option("-o,--output", ca.out, "output .btfc, or .btf (Bonn DFMF / FMF, fmf models)")->required();
   compress->add_option("--seed", ca.seed, "random seed (randomized algorithms)");
+  auto* tp = compress->add_option("--target-psnr", ca.target_psnr, "search the codec's quality knob for the cheapest setting reaching this PSNR (dB)");
+  auto* ts = compress->add_option("--target-ssim", ca.target_ssim, "... reaching this mean SSIM over the BTF's images")->check(CLI::Range(0.0, 1.0));
+  auto* tb = compress->add_option("--max-bytes", ca.max_bytes, "... the most accurate setting whose payload fits in this many bytes")->check(CLI::PositiveNumber);
+  tp->excludes(ts)->excludes(tb);
+  ts->excludes(tb);
   compress->callback([&] { code = cmd_compress(g, ca); });
 
   DecompressArgs da;
@@ -111,16 +117,37 @@ int main(int argc, char** argv) {
 
   BenchArgs ba;
   bool no_header = false;
-  auto* bench = app.add_subcommand("bench", "compress, decode and compare with one or more codec specs; one table row each");
-  bench->add_option("input", ba.in, "BTF (image set or raw .btfc)")->required();
-  bench->add_option("-c,--codec", ba.specs, "codec spec (repeatable)")->required();
-  bench->add_option("--label", ba.label, "data label in the table");
+  auto* bench = app.add_subcommand("bench", "measure codecs and parameter sweeps on a BTF: ratio, errors, rendered SSIM, times, throughput, memory");
+  bench->add_option("input", ba.in, "BTF (image set, raw .btfc or Bonn .btf)")->required();
+  bench->add_option("-c,--codec", ba.specs, "codec spec (repeatable); a comma list sweeps a parameter: fmf:rank=4,8,16")->required();
+  bench->add_option("--label", ba.label, "data label in the table (default: the input's name)");
   bench->add_option("--seed", ba.seed, "random seed");
+  bench->add_option("--csv", ba.csv, "write the runs as CSV to this file");
+  bench->add_flag("--append", ba.append, "append to the --csv file instead of replacing it");
+  bench->add_option("--json-out", ba.json_out, "write the JSON report to this file");
+  bench->add_option("--renders", ba.renders_dir, "write side-by-side PNGs (original | decoded | error x5) per run here");
+  bench->add_flag("--pareto", ba.pareto, "list which run wins at each byte budget (PSNR and SSIM fronts)");
+  bench->add_flag("--no-renders", ba.no_renders, "skip the rendered-image SSIM");
+  bench->add_option("--throughput-queries", ba.throughput_queries, "random interpolated evaluations per timing round (0 = skip)");
   bench->add_flag("--no-header", no_header, "omit the table header");
   bench->callback([&] {
     ba.header = !no_header;
     code = cmd_bench(g, ba);
   });
+
+  RenderArgs rn;
+  auto* rend = app.add_subcommand("render", "render a BTF or model: flat sample or sphere, point / directional light or lat-long environment");
+  rend->add_option("input", rn.in, "model .btfc, raw .btfc, image set or Bonn .btf")->required();
+  rend->add_option("-o,--output", rn.out, "output image (.png sRGB 8-bit, or .exr linear)")->required();
+  rend->add_option("--shape", rn.shape, "flat (one pixel per texel) or sphere")->check(CLI::IsMember({"flat", "sphere"}));
+  rend->add_option("--view", rn.view, "direction towards the camera, THETA,PHI degrees");
+  rend->add_option("--light", rn.light, "direction towards the light, THETA,PHI degrees");
+  rend->add_option("--distance", rn.distance, "point light at this distance (sample widths / sphere radii); 0 = directional")->check(CLI::Range(0.0, 1e6));
+  rend->add_option("--env", rn.env, "lat-long EXR environment (row 0 = zenith) instead of the light");
+  rend->add_option("--intensity", rn.intensity, "light scale")->check(CLI::Range(0.0, 1e30));
+  rend->add_option("--size", rn.size, "sphere image size in pixels")->check(CLI::Range(1, 8192));
+  rend->add_option("--tiles", rn.tiles, "sphere: texture repeats in theta (twice as many in phi)")->check(CLI::Range(1, 1024));
+  rend->callback([&] { code = cmd_render(g, rn); });
 
   try {
     app.parse(argc, argv);

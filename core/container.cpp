@@ -458,6 +458,19 @@ uint64_t ContainerWriter::file_size() const {
   return n;
 }
 
+uint32_t ContainerWriter::tensor_digest() const {
+  auto plan = plan_chunks(m_desc, m_codec, tensor_sources(m_tensors, m_views), std::string());
+  if (!plan.ok()) return 0;
+  uint32_t crc = 0;
+  for (const PlannedChunk& ch : plan.value()) {
+    const std::vector<uint8_t> hdr = chunk_header(ch);
+    crc = crc_update(crc, hdr.data(), hdr.size());
+    crc = crc_update(crc, ch.head.data(), ch.head.size());
+    crc = crc_update(crc, static_cast<const uint8_t*>(ch.data), ch.data_size);
+  }
+  return crc;
+}
+
 Status ContainerWriter::write(const std::string& path) const {
   auto plan = plan_chunks(m_desc, m_codec, tensor_sources(m_tensors, m_views), m_stats);
   if (!plan.ok()) return plan.status().with_context(path);

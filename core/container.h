@@ -66,6 +66,9 @@ class ContainerWriter {
   Status write(const std::string& path) const;
   // Total bytes write() would produce.
   uint64_t file_size() const;
+  // CRC-32 over every tensor chunk (header + payload) write() would produce: the model's bytes
+  // without the statistics (which hold timings), for determinism checks.
+  uint32_t tensor_digest() const;
 
  private:
   struct View {

@@ -112,7 +112,7 @@ std::string describe_params(std::span<const ParamSpec> table) {
         os << cs;
       }
     }
-    os << "  default " << t.default_value << "  -- " << t.help << "\n";
+    os << "  default " << t.default_value << "  -- " << t.help << (t.quality_knob ? " [quality knob]" : "") << "\n";
   }
   return os.str();
 }

@@ -24,6 +24,9 @@ struct ParamSpec {
   double min = 0, max = 0;            // inclusive; integer and real only
   std::vector<std::string> choices;   // choice only
   std::string help;
+  // The codec's one quality knob (larger = more accurate, more bytes): what budget targeting
+  // (codecs/target.h) searches and sweeps are usually over. At most one per codec.
+  bool quality_knob = false;
 };
 
 // "codec:key=value:key=value" split into its parts; no validation beyond syntax.

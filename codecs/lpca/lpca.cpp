@@ -20,7 +20,7 @@ constexpr uint32_t k_payload_version = 1;
 
 const ParamSpec k_params[] = {
     {"clusters", ParamSpec::Type::integer, "32", 1, 4096, {}, "clusters K of the local PCA (empty ones are dropped)"},
-    {"components", ParamSpec::Type::integer, "8", 1, 256, {}, "eigen-BRDFs c_B per cluster (besides the mean)"},
+    {"components", ParamSpec::Type::integer, "8", 1, 256, {}, "eigen-BRDFs c_B per cluster (besides the mean)", true},
     {"iters", ParamSpec::Type::integer, "10", 1, 1000, {}, "maximum {PCA, reassignment} iterations"},
     {"precision", ParamSpec::Type::choice, "half", 0, 0, {"half", "float"}, "storage of the eigen-BRDF table and the weights"},
     {"sh_order", ParamSpec::Type::integer, "5", 1, sh::k_max_order, {}, "spherical-harmonic order n (n^2 coefficients) for relighting / PRT"},

@@ -19,7 +19,7 @@ constexpr double k_phong_tolerance = 0.1;           // auto: Phong when |mu_Y - 
 
 const ParamSpec k_params[] = {
     {"levels", ParamSpec::Type::integer, "0", 0, 24, {}, "pyramid levels lmax + 1 (1 = plain PCA); 0 = auto (paper: stop at ~2 y texels)"},
-    {"y", ParamSpec::Type::integer, "8", 1, 4096, {}, "PCA components of Y per level"},
+    {"y", ParamSpec::Type::integer, "8", 1, 4096, {}, "PCA components of Y per level", true},
     {"c", ParamSpec::Type::integer, "2", 1, 4096, {}, "PCA components of Cb and of Cr per level"},
     {"mean", ParamSpec::Type::choice, "auto", 0, 0, {"auto", "phong", "stored"}, "top-level mean: Phong fit (+ Cb/Cr constants), stored vectors, or auto (Phong unless its relative residual > 0.1)"},
     {"laplacian_mean", ParamSpec::Type::choice, "auto", 0, 0, {"auto", "keep", "drop"}, "means of Laplacian levels: auto keeps one carrying > 1 % of its level's energy"},

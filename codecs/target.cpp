@@ -1,0 +1,149 @@
+#include "codecs/target.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <map>
+
+#include "core/metrics.h"
+
+namespace btfc {
+namespace {
+
+constexpr int k_real_steps = 64;
+
+struct Search {
+  const Btf& btf;
+  const Codec& codec;
+  SpecString base;
+  const ParamSpec& knob;
+  Target target;
+  Context& ctx;
+  std::vector<TargetProbe> probes;
+  std::map<long long, TargetProbe> cache;
+  std::map<long long, std::unique_ptr<Model>> models;  // only of passing probes still candidates
+
+  long long lo_index() const { return knob.type == ParamSpec::Type::integer ? (long long)std::llround(knob.min) : 0; }
+  long long hi_index() const { return knob.type == ParamSpec::Type::integer ? (long long)std::llround(knob.max) : k_real_steps; }
+  double value(long long i) const {
+    return knob.type == ParamSpec::Type::integer ? double(i) : knob.min + (knob.max - knob.min) * double(i) / k_real_steps;
+  }
+  long long index_of(double v) const {
+    if (knob.type == ParamSpec::Type::integer) return std::llround(v);
+    return std::llround((v - knob.min) / (knob.max - knob.min) * k_real_steps);
+  }
+  std::string spec_at(long long i) const {
+    std::string s = base.codec;
+    char buf[64];
+    if (knob.type == ParamSpec::Type::integer) std::snprintf(buf, sizeof buf, "%lld", i);
+    else std::snprintf(buf, sizeof buf, "%.9g", value(i));
+    bool placed = false;
+    for (const auto& [k, v] : base.values) {
+      if (k == knob.name) s += ":" + k + "=" + buf, placed = true;
+      else s += ":" + k + "=" + v;
+    }
+    if (!placed) s += ":" + knob.name + "=" + buf;
+    return s;
+  }
+
+  Result<TargetProbe> probe(long long i) {
+    if (auto it = cache.find(i); it != cache.end()) return it->second;
+    const std::string spec = spec_at(i);
+    BTFC_ASSIGN_OR_RETURN(auto resolved, resolve_spec(spec));
+    BTFC_ASSIGN_OR_RETURN(std::unique_ptr<Model> model, codec.encode(btf, resolved.second, ctx));
+    TargetProbe p;
+    p.knob = value(i);
+    if (target.kind == Target::Kind::max_bytes) {
+      p.measure = double(model->payload_bytes());
+      p.meets = p.measure <= target.value;
+    } else {
+      Btf decoded;
+      BTFC_RETURN_IF_ERROR(model->decode_all(decoded));
+      BTFC_ASSIGN_OR_RETURN(Metrics m, compare_btf(btf, decoded, target.kind == Target::Kind::ssim));
+      p.measure = target.kind == Target::Kind::psnr ? m.psnr : m.mean_ssim;
+      p.meets = p.measure >= target.value;
+    }
+    if (p.meets) models[i] = std::move(model);
+    cache[i] = p;
+    probes.push_back(p);
+    return p;
+  }
+};
+
+const char* kind_name(Target::Kind k) {
+  return k == Target::Kind::psnr ? "PSNR" : k == Target::Kind::ssim ? "mean SSIM" : "payload bytes";
+}
+
+}  // namespace
+
+const ParamSpec* quality_knob(const Codec& codec) {
+  for (const ParamSpec& p : codec.params())
+    if (p.quality_knob) return &p;
+  return nullptr;
+}
+
+Result<TargetChoice> choose_for_target(const Btf& btf, const std::string& spec, const Target& target, Context& ctx) {
+  if (!std::isfinite(target.value) || (target.kind == Target::Kind::ssim && (target.value <= 0 || target.value > 1)) ||
+      (target.kind == Target::Kind::max_bytes && target.value < 1))
+    return invalid_argument("target " + std::string(kind_name(target.kind)) + " " + std::to_string(target.value) + " is out of range");
+  BTFC_ASSIGN_OR_RETURN(auto resolved, resolve_spec(spec));  // validates the rest of the spec
+  const Codec& codec = *resolved.first;
+  const ParamSpec* knob = quality_knob(codec);
+  if (!knob) return unsupported(std::string("codec '") + codec.name() + "' declares no quality knob to search");
+  BTFC_ASSIGN_OR_RETURN(SpecString base, parse_spec_string(spec));
+  Search s{btf, codec, std::move(base), *knob, target, ctx, {}, {}, {}};
+  const long long lo_end = s.lo_index(), hi_end = s.hi_index();
+  long long start = std::clamp(s.index_of(resolved.second.get_real(knob->name)), lo_end, hi_end);
+
+  // g(i) = "meets" for accuracy targets and "exceeds" for a byte budget: false then true as the
+  // knob grows. Invariant: !g(lo), g(hi); lo = lo_end - 1 and hi = hi_end + 1 stand in for ends
+  // never probed. Accuracy targets choose hi (cheapest that meets), a budget lo (largest that fits).
+  const bool quality = target.kind != Target::Kind::max_bytes;
+  auto g = [&](const TargetProbe& q) { return q.meets == quality; };
+  long long lo = lo_end - 1, hi = hi_end + 1;
+  BTFC_ASSIGN_OR_RETURN(TargetProbe p, s.probe(start));
+  if (g(p)) {
+    hi = start;
+  } else {
+    lo = start;
+    double last = p.measure;
+    while (lo < hi_end) {  // grow geometrically until bracketed
+      const long long i = std::min(hi_end, std::max(lo + 1, lo * 2));
+      BTFC_ASSIGN_OR_RETURN(p, s.probe(i));
+      if (g(p)) {
+        hi = i;
+        break;
+      }
+      lo = i;
+      if (p.measure == last) {  // the codec clamps the knob to what the data allows: no change above
+        if (!quality) hi = lo + 1;
+        break;
+      }
+      last = p.measure;
+    }
+  }
+  while (hi - lo > 1 && hi <= hi_end) {
+    const long long mid = lo + (hi - lo) / 2;
+    BTFC_ASSIGN_OR_RETURN(p, s.probe(mid));
+    (g(p) ? hi : lo) = mid;
+  }
+  const long long chosen = quality ? hi : lo;
+  if (chosen < lo_end || chosen > hi_end || !s.models.count(chosen)) {
+    double best = quality ? -INFINITY : INFINITY;
+    for (const TargetProbe& q : s.probes) best = quality ? std::max(best, q.measure) : std::min(best, q.measure);
+    char buf[320];
+    std::snprintf(buf, sizeof buf, "%s: target %s %.6g is out of reach: the best probed setting gives %.6g", spec.c_str(),
+                  kind_name(target.kind), target.value, best);
+    return invalid_argument(buf);
+  }
+  TargetChoice c;
+  c.knob = knob->name;
+  c.knob_value = s.value(chosen);
+  c.measure = s.cache.at(chosen).measure;
+  c.model = std::move(s.models.at(chosen));
+  c.spec = c.model->spec();
+  c.probes = std::move(s.probes);
+  return c;
+}
+
+}  // namespace btfc

@@ -1,0 +1,47 @@
+// Budget targeting: pick a codec's quality knob so the model meets a target PSNR, a target mean
+// SSIM, or a byte budget ("fit a budget", spec README section 1.4).
+//
+// Each codec marks one parameter as its quality knob (ParamSpec::quality_knob: larger = more
+// accurate and more bytes; fmf rank, lpyr y, lpca components, ...). The search encodes, decodes
+// and measures at probe settings: first the default (or the value the spec gives), then doubling
+// or halving until the target is bracketed, then bisection, over the knob's integer range (a real
+// knob is searched on a grid of 64 steps over its range). Contract, for a knob along which the
+// measure is monotone: the chosen setting meets the target and the next cheaper one (knob - 1
+// step) does not, or it is the knob's cheapest setting. A target that even the most accurate
+// setting misses (or a budget the cheapest one exceeds) is an error that reports the best reached.
+// The other parameters of the spec are kept as given.
+#pragma once
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "codecs/codec.h"
+
+namespace btfc {
+
+struct Target {
+  enum class Kind { psnr, ssim, max_bytes } kind = Kind::psnr;
+  double value = 0;  // dB, mean SSIM in (0, 1], or payload bytes
+};
+
+struct TargetProbe {
+  double knob = 0;
+  double measure = 0;  // PSNR, mean SSIM or payload bytes
+  bool meets = false;
+};
+
+struct TargetChoice {
+  std::string knob;                // parameter name
+  double knob_value = 0;
+  std::string spec;                // canonical spec of the chosen model
+  double measure = 0;              // what it reached
+  std::vector<TargetProbe> probes;  // in the order tried
+  std::unique_ptr<Model> model;
+};
+
+// The codec's quality knob, or nullptr when it declares none.
+const ParamSpec* quality_knob(const Codec& codec);
+
+Result<TargetChoice> choose_for_target(const Btf& btf, const std::string& spec, const Target& target, Context& ctx);
+
+}  // namespace btfc

@@ -1,0 +1,56 @@
+#include "core/sysinfo.h"
+
+#include <unistd.h>
+
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+namespace btfc {
+namespace {
+
+// Value in kB of a "Key:   1234 kB" line of a /proc file, or 0.
+uint64_t proc_kb(const char* file, const std::string& key) {
+  std::ifstream in(file);
+  std::string line;
+  while (std::getline(in, line))
+    if (line.compare(0, key.size(), key) == 0 && line.size() > key.size() && line[key.size()] == ':')
+      return std::strtoull(line.c_str() + key.size() + 1, nullptr, 10);
+  return 0;
+}
+
+}  // namespace
+
+uint64_t peak_rss_bytes() { return proc_kb("/proc/self/status", "VmHWM") * 1024; }
+uint64_t current_rss_bytes() { return proc_kb("/proc/self/status", "VmRSS") * 1024; }
+
+bool reset_peak_rss() {
+  std::FILE* f = std::fopen("/proc/self/clear_refs", "w");
+  if (!f) return false;
+  const bool ok = std::fputs("5", f) >= 0;
+  return std::fclose(f) == 0 && ok;
+}
+
+std::string machine_summary() {
+  std::string cpu = "unknown CPU";
+  std::ifstream in("/proc/cpuinfo");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind("model name", 0) == 0) {
+      const size_t colon = line.find(':');
+      if (colon != std::string::npos) cpu = line.substr(colon + 2);
+      break;
+    }
+  const uint64_t mem_kb = proc_kb("/proc/meminfo", "MemTotal");
+  std::ostringstream s;
+  s << cpu << ", " << std::thread::hardware_concurrency() << " cores";
+  if (mem_kb) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, ", %.1f GiB", double(mem_kb) / (1024.0 * 1024.0));
+    s << buf;
+  }
+  return s.str();
+}
+
+}  // namespace btfc
