@@ -67,8 +67,8 @@ for t in "${TARGETS[@]}"; do
   nice -n 10 "$B/tests/fuzz/$t" -max_total_time="$SECONDS_PER" -print_final_stats=1 -timeout=20 \
     -rss_limit_mb=2048 -malloc_limit_mb=512 -max_len=65536 -artifact_prefix="$art/" \
     "$work" "${seeds[@]}" >"$log" 2>&1 || rc=$?
-  execs=$(grep -o 'stat::number_of_executed_units: [0-9]*' "$log" | awk '{print $2}' | tail -1)
-  rate=$(grep -o 'stat::average_exec_per_sec: [0-9]*' "$log" | awk '{print $2}' | tail -1)
+  execs=$(grep 'stat::number_of_executed_units:' "$log" | awk '{print $2}' | tail -1)
+  rate=$(grep 'stat::average_exec_per_sec:' "$log" | awk '{print $2}' | tail -1)
   last=$(grep -E '^#[0-9]+' "$log" | tail -1)
   files=$(echo "$last" | grep -o 'corp: [0-9]*' | awk '{print $2}')
   feats=$(echo "$last" | grep -o 'ft: [0-9]*' | awk '{print $2}')

@@ -6,6 +6,7 @@
 // added to the table is fuzzed from its first build. All CRCs are then repaired, so mutations
 // reach the loaders' own checks (shapes, counts, scales, indices, spec strings) rather than
 // stopping at the container's CRC check, which fuzz_container covers.
+#include <algorithm>
 #include <cstring>
 #include <vector>
 
@@ -23,7 +24,7 @@ uint32_t rd32(const std::vector<uint8_t>& b, size_t o) {
 // Replaces the codec name string at the start of the CODC payload, fixing the chunk size.
 void set_codec_name(std::vector<uint8_t>& b, const std::string& name) {
   size_t pos = 32;
-  while (b.size() - pos >= 32 && pos >= 32) {
+  while (pos <= b.size() && b.size() - pos >= 32) {
     uint64_t size = 0;
     for (int i = 0; i < 8; ++i) size |= uint64_t(b[pos + 8 + size_t(i)]) << (8 * i);
     if (size > b.size() - pos - 32) return;
@@ -38,7 +39,8 @@ void set_codec_name(std::vector<uint8_t>& b, const std::string& name) {
       payload.insert(payload.end(), b.begin() + long(body + 4 + len), b.begin() + long(body + size));
       const uint64_t nsize = payload.size();
       payload.resize(payload.size() + size_t((16 - nsize % 16) % 16), 0);
-      b.erase(b.begin() + long(body), b.begin() + long(body + size + old_pad));
+      // The last chunk's padding may be cut off by the end of the input.
+      b.erase(b.begin() + long(body), b.begin() + long(std::min(b.size(), body + size_t(size) + old_pad)));
       b.insert(b.begin() + long(body), payload.begin(), payload.end());
       for (int i = 0; i < 8; ++i) b[pos + 8 + size_t(i)] = uint8_t(nsize >> (8 * i));
       return;
