@@ -42,6 +42,11 @@ Result<std::unique_ptr<Model>> load_model(const ContainerReader& reader) {
   if (name == "raw") return invalid_argument(reader.path() + ": holds an uncompressed BTF, not a model");
   const Codec* codec = find_codec(name);
   if (!codec) return unsupported(reader.path() + ": unknown codec '" + name + "'");
+  // Loaders hold every tensor in memory as float (half payloads double), so the model needs
+  // about this much; refuse before any codec allocates (core/limits.h).
+  uint64_t need = 0;
+  for (const TensorInfo& t : reader.tensors()) need += t.size / dtype_size(t.dtype) * std::max<uint64_t>(4, dtype_size(t.dtype));
+  BTFC_RETURN_IF_ERROR(check_memory(size_t(need), reader.path() + ": loading the " + name + " model"));
   return codec->load(reader);
 }
 

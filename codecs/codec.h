@@ -24,7 +24,7 @@ namespace btfc {
 struct Context {
   uint64_t seed = 1;
   Progress* progress = nullptr;  // may be null
-  size_t max_bytes = size_t(1) << 40;
+  size_t max_bytes = memory_limit();  // core/limits.h: BTFC_MAX_MEMORY or set_memory_limit()
 };
 
 // A texel rectangle plus light/view index subsets (empty = all) to decode.

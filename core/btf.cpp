@@ -137,8 +137,9 @@ void FloatBuffer::Free::operator()(float* p) const { std::free(p); }
 Result<Btf> Btf::create(const BtfDesc& desc, size_t max_bytes) {
   BTFC_RETURN_IF_ERROR(desc.validate());
   if (desc.num_values() > max_bytes / sizeof(float))
-    return invalid_argument("BTF of " + desc.summary() + " needs " + std::to_string(desc.num_values() * 4) +
-                            " bytes, over the memory limit of " + std::to_string(max_bytes));
+    return invalid_argument("BTF of " + desc.summary() + " needs " + std::to_string(desc.num_values() * 4) + " bytes (" +
+                            std::to_string(desc.num_values() * 4 >> 20) + " MiB), over the memory limit of " +
+                            std::to_string(max_bytes) + " bytes (BTFC_MAX_MEMORY)");
   Btf b;
   b.m_desc = desc;
   try {

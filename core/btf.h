@@ -20,6 +20,7 @@
 #include <string>
 #include <vector>
 
+#include "core/limits.h"
 #include "core/status.h"
 
 namespace btfc {
@@ -105,8 +106,8 @@ class Btf {
  public:
   Btf() = default;
   // Allocates zero-filled storage; fails (without allocating) when desc is invalid or the
-  // buffer would exceed `max_bytes`.
-  static Result<Btf> create(const BtfDesc& desc, size_t max_bytes = size_t(1) << 40);
+  // buffer would exceed `max_bytes` (default: the process memory limit, core/limits.h).
+  static Result<Btf> create(const BtfDesc& desc, size_t max_bytes = memory_limit());
 
   const BtfDesc& desc() const { return m_desc; }
   float* data() { return m_data.data(); }

@@ -100,7 +100,7 @@ std::vector<fs::path> image_folders(const fs::path& dir, std::error_code& ec) {
   std::vector<fs::path> folders{dir};
   for (const auto& e : fs::directory_iterator(dir, ec)) {
     const std::string name = e.path().filename().string();
-    if (e.is_directory(ec) && std::regex_search(name, view_dir_regex())) folders.push_back(e.path());
+    if (e.is_directory(ec) && is_view_folder_name(name)) folders.push_back(e.path());
   }
   return folders;
 }
@@ -278,6 +278,12 @@ Result<ImageName> parse_image_name(const std::string& filename) {
   static const std::regex re(R"((?:^|.*[ _])tl(\d{3})[ _]pl(\d{3})[ _]tv(\d{3})[ _]pv(\d{3})\.(jpe?g|png|exr|hdr))",
                              std::regex::icase);
   const std::string base = fs::path(filename).filename().string();
+  // libstdc++'s regex matcher recurses once per character of ".*": a name of 40 KB overflowed
+  // the stack (tests/corrupt/handmade_long_name.name). No file system stores a name longer than
+  // 255 bytes (NAME_MAX), so longer ones are rejected before matching.
+  if (base.size() > 255)
+    return invalid_argument(base.substr(0, 40) + "...: not an image-set name (" + std::to_string(base.size()) +
+                            " bytes, longer than any file name)");
   std::smatch m;
   if (!std::regex_match(base, m, re))
     return invalid_argument(base + ": not an image-set name (expected '... tlTTT plPPP tvTTT pvPPP.jpg' or "
@@ -287,6 +293,8 @@ Result<ImageName> parse_image_name(const std::string& filename) {
     return invalid_argument(base + ": angle of 360 degrees or more");
   return n;
 }
+
+bool is_view_folder_name(const std::string& name) { return std::regex_search(name, view_dir_regex()); }
 
 bool is_image_set(const std::string& path) {
   try {

@@ -30,6 +30,9 @@ struct ImageName {
 // "tl015_pl000_tv000_pv000.exr"). Fails on names of another shape; angles must be < 360.
 Result<ImageName> parse_image_name(const std::string& filename);
 
+// True for a view-folder name: one ending in "tvTTT_pvPPP" (case-insensitive).
+bool is_view_folder_name(const std::string& name);
+
 // Cheap check: does `path` look like an image-set directory?
 bool is_image_set(const std::string& path);
 

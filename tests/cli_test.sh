@@ -82,6 +82,14 @@ check wrong-magic 2 "$BTFC" decompress "$W/magic.btfc" -o "$W/bad.btfc"
 test ! -e "$W/bad.btfc" && echo "ok   no-partial-output" || { echo "FAIL no-partial-output"; fails=$((fails + 1)); }
 ls "$W" | grep -q tmp- && { echo "FAIL temp files left"; fails=$((fails + 1)); } || echo "ok   no-temp-files"
 
+# Memory limit (core/limits.h): the 12x10 decode needs 9.4 MB; under a 2 MiB limit decompress
+# fails before allocating (exit 1: the limit is a parameter), leaves no output, names the limit;
+# a 4x4 region (1.3 MB) still decodes under it.
+check max-memory 1 env BTFC_MAX_MEMORY=2M "$BTFC" decompress "$W/m.btfc" -o "$W/limited.btfc"
+expect_grep max-memory-msg "memory limit" "$W/err.txt"
+test ! -e "$W/limited.btfc" && echo "ok   max-memory-no-output" || { echo "FAIL max-memory-no-output"; fails=$((fails + 1)); }
+check max-memory-region 0 env BTFC_MAX_MEMORY=2M "$BTFC" decompress "$W/m.btfc" -o "$W/limited.btfc" --region 0,0,4,4
+
 # The real measured slice, when present: read, compress, compare.
 if [ -d "${DATA_DIR:-}/ubo2003_tv000_pv000_81lights" ]; then
   check real-info 0 "$BTFC" info "$DATA_DIR/ubo2003_tv000_pv000_81lights"

@@ -176,6 +176,9 @@ class BdiModel final : public AbrdfModel {
     std::vector<char> comp(m_bytes[chunk]);
     BTFC_RETURN_IF_ERROR(m_src.read_at(m_off[chunk], comp.data(), comp.size(), f));
     const uint64_t want = chunk_texels(chunk) * m_desc.abrdf_size() * 2;
+    // A bzip2 chunk declares its decompressed size (a few bytes can inflate to GBs): refuse one
+    // over the memory limit before allocating (core/limits.h).
+    BTFC_RETURN_IF_ERROR(check_memory(size_t(want), m_src.path() + ": " + f + " decompressed"));
     auto out = std::make_shared<std::vector<uint16_t>>(want / 2 + 1);
     unsigned int got = unsigned(want + 2);  // one spare value: a longer stream is detected, not truncated
     const int rc = BZ2_bzBuffToBuffDecompress(reinterpret_cast<char*>(out->data()), &got, comp.data(), unsigned(comp.size()), 0, 0);

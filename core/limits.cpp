@@ -1,0 +1,70 @@
+#include "core/limits.h"
+
+#include <atomic>
+#include <cctype>
+#include <cstdio>
+#include <cstdlib>
+
+namespace btfc {
+
+namespace {
+
+std::atomic<size_t> g_limit{0};  // 0 = not set yet
+
+size_t env_limit() {
+  const char* e = std::getenv("BTFC_MAX_MEMORY");
+  if (!e || !*e) return k_default_memory_limit;
+  Result<size_t> r = parse_byte_size(e);
+  if (!r.ok() || r.value() == 0) {
+    std::fprintf(stderr, "btfc: warning: ignoring BTFC_MAX_MEMORY='%s' (%s)\n", e,
+                 r.ok() ? "zero" : r.status().message().c_str());
+    return k_default_memory_limit;
+  }
+  return r.value();
+}
+
+}  // namespace
+
+size_t memory_limit() {
+  size_t v = g_limit.load(std::memory_order_relaxed);
+  if (v == 0) {
+    v = env_limit();
+    g_limit.store(v, std::memory_order_relaxed);
+  }
+  return v;
+}
+
+void set_memory_limit(size_t bytes) { g_limit.store(bytes == 0 ? env_limit() : bytes, std::memory_order_relaxed); }
+
+Result<size_t> parse_byte_size(const std::string& text) {
+  auto bad = [&](const char* why) { return invalid_argument("memory size '" + text + "': " + why); };
+  size_t i = 0, v = 0;
+  if (text.empty() || !std::isdigit(static_cast<unsigned char>(text[0]))) return bad("expected a number of bytes, e.g. 512M or 4G");
+  for (; i < text.size() && std::isdigit(static_cast<unsigned char>(text[i])); ++i)
+    if (__builtin_mul_overflow(v, size_t(10), &v) || __builtin_add_overflow(v, size_t(text[i] - '0'), &v)) return bad("too large");
+  unsigned shift = 0;
+  if (i < text.size()) {
+    switch (std::toupper(static_cast<unsigned char>(text[i]))) {
+      case 'K': shift = 10; break;
+      case 'M': shift = 20; break;
+      case 'G': shift = 30; break;
+      case 'T': shift = 40; break;
+      default: return bad("unknown suffix (use K, M, G or T)");
+    }
+    ++i;
+    if (i < text.size() && (text[i] == 'B' || text[i] == 'b')) ++i;  // "4GB" reads as 4 GiB too
+    if (i != text.size()) return bad("trailing characters");
+  }
+  if (shift && v > (~size_t(0) >> shift)) return bad("too large");
+  return v << shift;
+}
+
+Status check_memory(size_t bytes, const std::string& what) {
+  const size_t lim = memory_limit();
+  if (bytes <= lim) return {};
+  return invalid_argument(what + " needs " + std::to_string(bytes) + " bytes (" + std::to_string(bytes >> 20) +
+                          " MiB), over the memory limit of " + std::to_string(lim) +
+                          " bytes (set BTFC_MAX_MEMORY to raise it)");
+}
+
+}  // namespace btfc
