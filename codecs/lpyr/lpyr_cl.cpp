@@ -17,7 +17,6 @@ namespace {
   } while (0)
 
 constexpr size_t k_tile_bytes = size_t(256) << 20;
-constexpr size_t k_run = 64;  // LPYR_RUN in kernels/lpyr.cl
 
 template <class T>
 Status set_arg(cl_kernel k, int i, const T& v) {
@@ -63,8 +62,8 @@ Status reduce_cl(const float* src, int w, int h, size_t d, float* dst) {
     BTFC_RETURN_IF_ERROR(set_arg(k, a++, om));
     BTFC_RETURN_IF_ERROR(set_arg(k, a++, cl_int(y0)));
     BTFC_RETURN_IF_ERROR(set_arg(k, a++, cl_int(rows)));
-    const size_t global[2] = {(d + k_run - 1) / k_run, size_t(rows) * size_t(w2)};
-    BTFC_CL_CHECK(clEnqueueNDRangeKernel(queue, k, 2, nullptr, global, nullptr, 0, nullptr, nullptr), "lpyr_reduce");
+    const size_t global = size_t(rows) * size_t(w2);
+    BTFC_CL_CHECK(clEnqueueNDRangeKernel(queue, k, 1, nullptr, &global, nullptr, 0, nullptr, nullptr), "lpyr_reduce");
     BTFC_RETURN_IF_ERROR(ob.sync_to_host(queue, out_bytes));
   }
   return {};
@@ -97,8 +96,8 @@ Status subtract_up_tiles(float* f, int w, int h, size_t d, const float* next, in
     BTFC_RETURN_IF_ERROR(set_arg(k, a++, cl_int(rows)));
     BTFC_RETURN_IF_ERROR(set_arg(k, a++, nm));
     BTFC_RETURN_IF_ERROR(set_arg(k, a++, cl_int(yn0)));
-    const size_t global[2] = {(d + k_run - 1) / k_run, size_t(rows) * size_t(w)};
-    BTFC_CL_CHECK(clEnqueueNDRangeKernel(queue, k, 2, nullptr, global, nullptr, 0, nullptr, nullptr), "lpyr_subtract_up");
+    const size_t global = size_t(rows) * size_t(w);
+    BTFC_CL_CHECK(clEnqueueNDRangeKernel(queue, k, 1, nullptr, &global, nullptr, 0, nullptr, nullptr), "lpyr_subtract_up");
     BTFC_RETURN_IF_ERROR(fb.sync_to_host(queue, f_bytes));
     *done = y0 + rows;
   }
