@@ -2,6 +2,7 @@
 #include "codecs/lpca/clustering.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <numeric>
@@ -325,7 +326,9 @@ Result<FitResult> fit_local_pca(const Btf& btf, const FitOptions& opt) {
     res.sq_error.push_back(std::accumulate(err.begin(), err.end(), 0.0));
     if (opt.progress) opt.progress->advance();
     if (it + 1 == opt.iters) break;
+    const auto ta = std::chrono::steady_clock::now();
     BTFC_ASSIGN_OR_RETURN(int moved, assign_step(X, cls, c, x2, assign, err, Wm));
+    res.assign_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - ta).count();
     moved += reseed_empty(assign, err, K, res.reseeded);
     res.changes.push_back(moved);
     if (moved == 0) {
