@@ -7,7 +7,12 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/QR>
+#include <unistd.h>
+
 #include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
 #include <random>
 
 #include "codecs/codec.h"
@@ -362,4 +367,46 @@ TEST(OpenCLKernels, LpyrEncodeMatchesCpuPath) {
   }
   ocl::set_device_choice(ocl::DeviceChoice::automatic);
   EXPECT_LE(rel_diff(out[1].data(), out[0].data(), out[0].size()), 1e-4);
+}
+
+// A broken lpca.cl / lpyr.cl (development override) gives the compiler log under --device cl and
+// falls back to the C++ references with a warning under --device auto. Its own process under
+// ctest (gtest_discover_tests), so the broken programs are not cached for other tests.
+TEST(OpenCLKernels, BrokenLpcaAndLpyrKernelsFallBack) {
+  REQUIRE_CL();
+  const std::string dir = ::testing::TempDir() + "btfc_broken_codec_kernels_" + std::to_string(::getpid());
+  std::filesystem::create_directories(dir);
+  std::filesystem::copy_file(std::string(BTFC_SOURCE_DIR) + "/kernels/btfc_shared.h", dir + "/btfc_shared.h",
+                             std::filesystem::copy_options::overwrite_existing);
+  std::ofstream(dir + "/lpca.cl") << "__kernel void lpca_project(__global float* x) { not C either }\n";
+  std::ofstream(dir + "/lpyr.cl") << "__kernel void lpyr_reduce(__global float* x) { still not C }\n";
+  setenv("BTFC_KERNEL_DIR", dir.c_str(), 1);
+  AssignCase a = make_assign_case(19, 40, 3, 2, 1);
+  std::vector<uint32_t> as(40, 0), ar(40, 0);
+  std::vector<double> es(40), er(40);
+  auto bad = lpca_cl::assign_cl(a.p, as.data(), es.data());
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.status().code(), StatusCode::device_error);
+  EXPECT_NE(bad.status().message().find("building OpenCL program lpca.cl failed"), std::string::npos) << bad.status().message();
+  EXPECT_NE(bad.status().message().find("compiler log"), std::string::npos);
+  std::vector<float> src(5 * 3 * 4, 1.f), dst(3 * 2 * 4);
+  Status ls = lpyr::reduce_cl(src.data(), 5, 3, 4, dst.data());
+  EXPECT_EQ(ls.code(), StatusCode::device_error);
+  EXPECT_NE(ls.message().find("lpyr.cl"), std::string::npos) << ls.message();
+  // --device cl: the dispatchers report the error; auto: they warn once and run the reference.
+  ocl::set_device_choice(ocl::DeviceChoice::cl);
+  EXPECT_FALSE(lpca_cl::assign(a.p, as.data(), es.data()).ok());
+  EXPECT_FALSE(lpyr::reduce_any(src.data(), 5, 3, 4, dst.data()).ok());
+  ocl::set_device_choice(ocl::DeviceChoice::automatic);
+  std::fill(as.begin(), as.end(), 0u);
+  auto got = lpca_cl::assign(a.p, as.data(), es.data());
+  ASSERT_TRUE(got.ok());
+  EXPECT_EQ(got.value(), lpca_cl::assign_reference(a.p, ar.data(), er.data()));
+  EXPECT_EQ(as, ar);
+  std::fill(dst.begin(), dst.end(), 0.f);
+  ASSERT_TRUE(lpyr::reduce_any(src.data(), 5, 3, 4, dst.data()).ok());
+  for (float v : dst) EXPECT_FLOAT_EQ(v, 1.f);  // box mean of a constant
+  EXPECT_NE(ocl::fallback_reason().find(".cl"), std::string::npos) << ocl::fallback_reason();
+  unsetenv("BTFC_KERNEL_DIR");
+  std::filesystem::remove_all(dir);
 }
