@@ -99,6 +99,25 @@ int main(int argc, char** argv) {
   tc = best_of(3, [&] { (void)dev.value()->eval_interp(cq, out.data()); });
   tr = best_of(3, [&] { fmf_cl::eval_interp_reference(f, cq, out.data()); });
   report("fmf_eval_interp coh.", tc, tr, double(nq), "evals");
+  // The same coherent stream through the grouped batch path: runs sharing a direction pair are
+  // detected and evaluated by blending the pair's 9 rows once (fmf_cl.h eval_batch).
+  tc = best_of(3, [&] { (void)dev.value()->eval_batch(cq, out.data()); });
+  tr = best_of(3, [&] { fmf_cl::eval_batch_reference(f, cq, out.data()); });
+  report("fmf_eval_batch coh.", tc, tr, double(nq), "evals");
+  // The renderer's call: one direction pair, a whole frame of texels (eval_pair).
+  {
+    std::vector<int> frame(static_cast<size_t>(texels));
+    for (int t = 0; t < texels; ++t) frame[size_t(t)] = t;
+    const size_t frames = std::max<size_t>(1, nq / size_t(texels));
+    (void)dev.value()->eval_pair(iq[0], frame, out.data());
+    tc = best_of(3, [&] {
+      for (size_t fr = 0; fr < frames; ++fr) (void)dev.value()->eval_pair(iq[fr], frame, out.data());
+    });
+    tr = best_of(3, [&] {
+      for (size_t fr = 0; fr < frames; ++fr) fmf_cl::eval_pair_reference(f, iq[fr], frame, out.data());
+    });
+    report("fmf_eval_pair frames", tc, tr, double(frames * size_t(texels)), "evals");
+  }
   tc = best_of(3, [&] { (void)dev.value()->eval_measured(mq, out.data()); });
   tr = best_of(3, [&] { fmf_cl::eval_measured_reference(f, mq, out.data()); });
   report("fmf_eval_measured", tc, tr, double(nq), "evals");

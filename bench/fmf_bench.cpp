@@ -20,6 +20,7 @@
 
 #include "codecs/codec.h"
 #include "codecs/fmf/svd.h"
+#include "core/cl_runtime.h"
 #include "core/blas_env.h"
 #include "core/synth.h"
 
@@ -88,6 +89,8 @@ int main(int argc, char** argv) {
     std::printf("codec      %s: encode %.2f s, payload %.1f MB (ratio %.0f : 1 vs float32), peak RSS %.2f GB (%.2f x input)\n",
                 model.value()->spec().c_str(), enc, double(model.value()->payload_bytes()) / 1e6,
                 double(d.num_values()) * 4 / double(model.value()->payload_bytes()), peak_rss_gb(), peak_rss_gb() / input_gb);
+    for (const auto& [k, v] : model.value()->stats().numbers) std::printf("  %s = %.6g\n", k.c_str(), v);
+    std::printf("  kernels ran on %s\n", ocl::device_summary().c_str());
     return 0;
   }
   auto run = [&](int q, int p, const char* label) {

@@ -5,6 +5,7 @@
 #include <Imath/half.h>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 
 #include <mutex>
 
@@ -206,19 +207,30 @@ Status FmfModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
         (e.light >= 0 && (size_t(e.light) >= m_desc.num_lights() || size_t(e.view) >= m_desc.num_views())))
       return Model::eval_batch(q, out);  // the reference reports the bad query
   }
+  // A query with the same directions as its predecessor in its block (a frame's texels under one
+  // light and view) reuses its weights: the Delaunay lookups would cost more than the evaluation.
+  const size_t qb = 4096;
 #pragma omp parallel for schedule(static)
-  for (size_t i = 0; i < q.size(); ++i) {
-    const EvalQuery& e = q[i];
-    btfc_fmf_query& k = kq[i];
-    k.texel = e.x + m_desc.width * e.y;
-    DirWeights a, b;
-    if (e.light >= 0) a.index = {e.light, e.light, e.light}, b.index = {e.view, e.view, e.view};
-    else a = m_light_interp.weights(e.wl), b = m_view_interp.weights(e.wv);
-    for (int j = 0; j < 3; ++j) k.light[j] = a.index[j], k.view[j] = b.index[j], k.wl[j] = a.weight[j], k.wv[j] = b.weight[j];
-  }
+  for (size_t b0 = 0; b0 < q.size(); b0 += qb)
+    for (size_t i = b0; i < std::min(q.size(), b0 + qb); ++i) {
+      const EvalQuery& e = q[i];
+      btfc_fmf_query& k = kq[i];
+      if (i > b0 && e.light < 0 && q[i - 1].light < 0 && std::memcmp(&e.wl, &q[i - 1].wl, sizeof(Vec3)) == 0 &&
+          std::memcmp(&e.wv, &q[i - 1].wv, sizeof(Vec3)) == 0) {
+        k = kq[i - 1];
+        k.texel = e.x + m_desc.width * e.y;
+        continue;
+      }
+      k.texel = e.x + m_desc.width * e.y;
+      DirWeights a, b;
+      if (e.light >= 0) a.index = {e.light, e.light, e.light}, b.index = {e.view, e.view, e.view};
+      else a = m_light_interp.weights(e.wl), b = m_view_interp.weights(e.wv);
+      for (int j = 0; j < 3; ++j) k.light[j] = a.index[j], k.view[j] = b.index[j], k.wl[j] = a.weight[j], k.wv[j] = b.weight[j];
+    }
+  // Runs of queries sharing a direction pair go through the blended-rows kernel (fmf_cl.h).
   Status s;
   auto dev = device_factors();
-  s = dev.ok() ? dev.value()->eval_interp(kq, out) : dev.status();
+  s = dev.ok() ? dev.value()->eval_batch(kq, out) : dev.status();
   if (s.ok()) return s;
   if (!ocl::fall_back_after(s)) return s;
   return Model::eval_batch(q, out);

@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
+#include <cstring>
 
 #include "core/cl_runtime.h"
 
@@ -12,14 +14,16 @@ namespace {
 constexpr float k_eps = BTFC_DRR_EPS;
 
 // The kernel's summation order: 8 lanes of partial sums, then a pairwise reduction and the tail.
+// Written as multiply + add (not std::fma) so GCC vectorizes the lanes: a fair yardstick for
+// the kernels' speed; fused or not, the results differ only by float rounding.
 float dot(const float* a, const float* b, int C) {
   float acc[8] = {0, 0, 0, 0, 0, 0, 0, 0};
   int k = 0;
   for (; k + 8 <= C; k += 8)
-    for (int j = 0; j < 8; ++j) acc[j] = std::fma(a[k + j], b[k + j], acc[j]);
+    for (int j = 0; j < 8; ++j) acc[j] += a[k + j] * b[k + j];
   const float h0 = acc[0] + acc[4], h1 = acc[1] + acc[5], h2 = acc[2] + acc[6], h3 = acc[3] + acc[7];
   float s = (h0 + h1) + (h2 + h3);
-  for (; k < C; ++k) s = std::fma(a[k], b[k], s);
+  for (; k < C; ++k) s += a[k] * b[k];
   return s;
 }
 
@@ -52,7 +56,121 @@ void eval_measured_reference(const PackedFactors& f, std::span<const MeasuredQue
   for (size_t i = 0; i < q.size(); ++i) value(f, q[i].texel, q[i].light, q[i].view, out + 3 * i);
 }
 
+namespace {
+
+// The rgb interpolation in the kernel's order: the 9 rows blended 8 components at a time and
+// dotted with the texel's row as they go (fmf.cl, fmf_eval_interp).
+void interp_rgb(const PackedFactors& f, const btfc_fmf_query& Q, float* out) {
+  const int C = f.C;
+  const float* s = f.SxV.data() + size_t(Q.texel) * C;
+  const float* row[9];
+  float w[9];
+  int m = 0;
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b) {
+      const float wab = Q.wl[a] * Q.wv[b];
+      if (wab == 0) continue;
+      row[m] = f.U.data() + size_t(3 * (Q.light[a] + f.nL * Q.view[b])) * C;
+      w[m++] = wab;
+    }
+  float acc[3][8] = {};
+  int k = 0;
+  for (; k + 8 <= C; k += 8)
+    for (int c = 0; c < 3; ++c) {
+      float u[8] = {};
+      for (int j = 0; j < m; ++j)
+        for (int l = 0; l < 8; ++l) u[l] += w[j] * row[j][c * C + k + l];
+      for (int l = 0; l < 8; ++l) acc[c][l] += u[l] * s[k + l];
+    }
+  float r[3];
+  for (int c = 0; c < 3; ++c) {
+    const float* a = acc[c];
+    r[c] = ((a[0] + a[4]) + (a[1] + a[5])) + ((a[2] + a[6]) + (a[3] + a[7]));
+  }
+  for (; k < C; ++k)
+    for (int c = 0; c < 3; ++c) {
+      float u = 0;
+      for (int j = 0; j < m; ++j) u += w[j] * row[j][c * C + k];
+      r[c] += u * s[k];
+    }
+  for (int c = 0; c < 3; ++c) out[c] = r[c];
+}
+
+bool same_pair(const btfc_fmf_query& a, const btfc_fmf_query& b) {
+  return std::memcmp(a.light, b.light, sizeof(a) - offsetof(btfc_fmf_query, light)) == 0;
+}
+
+// Calls pair(first, n) for each run of >= k_min_pair_run consecutive queries sharing a direction
+// pair and interp(first, n) for the stretches between them.
+template <class Interp, class Pair>
+Status for_each_run(std::span<const btfc_fmf_query> q, Interp&& interp, Pair&& pair) {
+  size_t loose = 0, i = 0;  // [loose, i) not yet evaluated, no long run inside
+  while (i < q.size()) {
+    size_t j = i + 1;
+    while (j < q.size() && same_pair(q[j], q[i])) ++j;
+    if (j - i >= k_min_pair_run) {
+      if (i > loose) BTFC_RETURN_IF_ERROR(interp(loose, i - loose));
+      BTFC_RETURN_IF_ERROR(pair(i, j - i));
+      loose = j;
+    }
+    i = j;
+  }
+  if (q.size() > loose) BTFC_RETURN_IF_ERROR(interp(loose, q.size() - loose));
+  return {};
+}
+
+std::vector<int> texels_of(std::span<const btfc_fmf_query> q) {
+  std::vector<int> t(q.size());
+  for (size_t i = 0; i < q.size(); ++i) t[i] = q[i].texel;
+  return t;
+}
+
+}  // namespace
+
+void blend_pair(const PackedFactors& f, const btfc_fmf_query& Q, float* Ub) {
+  const size_t n = size_t(3) * f.C;
+  std::fill(Ub, Ub + n, 0.0f);
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b) {
+      const float w = Q.wl[a] * Q.wv[b];
+      if (w == 0) continue;
+      const float* row = f.U.data() + size_t(3 * (Q.light[a] + f.nL * Q.view[b])) * f.C;
+      for (size_t k = 0; k < n; ++k) Ub[k] += w * row[k];
+    }
+}
+
+void eval_pair_reference(const PackedFactors& f, const btfc_fmf_query& pair, std::span<const int> texels, float* out) {
+  if (f.mode != BTFC_FMF_RGB) {
+    std::vector<btfc_fmf_query> q(texels.size(), pair);
+    for (size_t i = 0; i < q.size(); ++i) q[i].texel = texels[i];
+    eval_interp_reference(f, q, out);
+    return;
+  }
+  const int C = f.C;
+  std::vector<float> Ub(size_t(3) * C);
+  blend_pair(f, pair, Ub.data());
+#pragma omp parallel for schedule(static)
+  for (size_t i = 0; i < texels.size(); ++i) {
+    const float* s = f.SxV.data() + size_t(texels[i]) * C;
+    for (int c = 0; c < 3; ++c) out[3 * i + c] = dot(Ub.data() + c * C, s, C);
+  }
+}
+
+void eval_batch_reference(const PackedFactors& f, std::span<const btfc_fmf_query> q, float* out) {
+  (void)for_each_run(
+      q, [&](size_t first, size_t n) { eval_interp_reference(f, q.subspan(first, n), out + 3 * first); return Status(); },
+      [&](size_t first, size_t n) {
+        eval_pair_reference(f, q[first], texels_of(q.subspan(first, n)), out + 3 * first);
+        return Status();
+      });
+}
+
 void eval_interp_reference(const PackedFactors& f, std::span<const btfc_fmf_query> q, float* out) {
+  if (f.mode == BTFC_FMF_RGB) {
+#pragma omp parallel for schedule(static)
+    for (size_t i = 0; i < q.size(); ++i) interp_rgb(f, q[i], out + 3 * i);
+    return;
+  }
 #pragma omp parallel for schedule(static)
   for (size_t i = 0; i < q.size(); ++i) {
     float acc[3] = {0, 0, 0}, v[3];
@@ -137,6 +255,44 @@ Status DeviceFactors::eval_measured(std::span<const MeasuredQuery> q, float* out
 
 Status DeviceFactors::eval_interp(std::span<const btfc_fmf_query> q, float* out) const {
   return run_eval(*m, "fmf_eval_interp", q, out);
+}
+
+Status DeviceFactors::eval_pair(const btfc_fmf_query& pair, std::span<const int> texels, float* out) const {
+  const PackedFactors& s = m->shape;
+  if (s.mode != BTFC_FMF_RGB) {
+    std::vector<btfc_fmf_query> q(texels.size(), pair);
+    for (size_t i = 0; i < q.size(); ++i) q[i].texel = texels[i];
+    return eval_interp(q, out);
+  }
+  BTFC_ASSIGN_OR_RETURN(ocl::Runtime * rt, ocl::Runtime::get());
+  BTFC_ASSIGN_OR_RETURN(cl_command_queue queue, rt->queue());
+  BTFC_ASSIGN_OR_RETURN(cl_kernel k, rt->kernel("fmf", "fmf_eval_pair_rgb"));
+  std::vector<float> Ub(size_t(3) * s.C);
+  blend_pair(s, pair, Ub.data());
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer ub, ocl::Buffer::create(*rt, Ub.size() * 4, Ub.data(), CL_MEM_READ_ONLY));
+  for (size_t first = 0; first < texels.size(); first += k_slice) {
+    const size_t n = std::min(k_slice, texels.size() - first);
+    BTFC_ASSIGN_OR_RETURN(ocl::Buffer tb, ocl::Buffer::wrap(*rt, n * 4, const_cast<int*>(texels.data() + first), CL_MEM_READ_ONLY));
+    BTFC_ASSIGN_OR_RETURN(ocl::Buffer ob, ocl::Buffer::wrap(*rt, n * 12, out + 3 * first, CL_MEM_WRITE_ONLY));
+    cl_mem a0 = ub.get(), a1 = m->SxV.get(), a3 = tb.get(), a5 = ob.get();
+    const cl_int C = s.C, nn = cl_int(n);
+    BTFC_CL_CHECK(clSetKernelArg(k, 0, sizeof(cl_mem), &a0), "arg");
+    BTFC_CL_CHECK(clSetKernelArg(k, 1, sizeof(cl_mem), &a1), "arg");
+    BTFC_CL_CHECK(clSetKernelArg(k, 2, 4, &C), "arg");
+    BTFC_CL_CHECK(clSetKernelArg(k, 3, sizeof(cl_mem), &a3), "arg");
+    BTFC_CL_CHECK(clSetKernelArg(k, 4, 4, &nn), "arg");
+    BTFC_CL_CHECK(clSetKernelArg(k, 5, sizeof(cl_mem), &a5), "arg");
+    const size_t local = 64, global = (n + local - 1) / local * local;
+    BTFC_CL_CHECK(clEnqueueNDRangeKernel(queue, k, 1, nullptr, &global, &local, 0, nullptr, nullptr), "fmf_eval_pair_rgb");
+    BTFC_RETURN_IF_ERROR(ob.sync_to_host(queue, n * 12));
+  }
+  return {};
+}
+
+Status DeviceFactors::eval_batch(std::span<const btfc_fmf_query> q, float* out) const {
+  return for_each_run(
+      q, [&](size_t first, size_t n) { return eval_interp(q.subspan(first, n), out + 3 * first); },
+      [&](size_t first, size_t n) { return eval_pair(q[first], texels_of(q.subspan(first, n)), out + 3 * first); });
 }
 
 Status DeviceFactors::decode(std::span<const int> texels, std::span<const int> lights, std::span<const int> views,

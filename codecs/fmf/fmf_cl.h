@@ -29,6 +29,18 @@ struct MeasuredQuery {
 
 void eval_measured_reference(const PackedFactors& f, std::span<const MeasuredQuery> q, float* out_rgb);
 void eval_interp_reference(const PackedFactors& f, std::span<const btfc_fmf_query> q, float* out_rgb);
+// One direction pair (the texel field of `pair` is ignored) and many texels: a frame or tile of
+// texels under one light and view, the rendering case. rgb mode blends the pair's 9 eigen-ABRDF
+// rows once (blend_pair) and then costs one C-length dot per channel and texel; dfmf mode is not
+// linear in U (exp per sample) and evaluates like eval_interp.
+void eval_pair_reference(const PackedFactors& f, const btfc_fmf_query& pair, std::span<const int> texels, float* out_rgb);
+// Ub[c C + k] = sum_ab (wl_a wv_b) U[3 (l_a + nL v_b) + c][k], (a, b) in row-major order, zero
+// weights skipped (rgb mode; the kernels use the same order).
+void blend_pair(const PackedFactors& f, const btfc_fmf_query& pair, float* Ub);
+// A mixed batch: runs of at least k_min_pair_run consecutive queries sharing one direction pair
+// go through eval_pair, everything else through eval_interp. Results keep the queries' order.
+constexpr size_t k_min_pair_run = 64;
+void eval_batch_reference(const PackedFactors& f, std::span<const btfc_fmf_query> q, float* out_rgb);
 // Decodes texels `texels` (indices into the model) at direction rows selected by (lights, views):
 // out[i][row'] in the layout of core/btf.h for the sub-BTF (row' = c + 3 (l' + nl' v')).
 void decode_reference(const PackedFactors& f, std::span<const int> texels, std::span<const int> lights,
@@ -41,6 +53,8 @@ class DeviceFactors {
   ~DeviceFactors();
   Status eval_measured(std::span<const MeasuredQuery> q, float* out_rgb) const;
   Status eval_interp(std::span<const btfc_fmf_query> q, float* out_rgb) const;
+  Status eval_pair(const btfc_fmf_query& pair, std::span<const int> texels, float* out_rgb) const;
+  Status eval_batch(std::span<const btfc_fmf_query> q, float* out_rgb) const;
   Status decode(std::span<const int> texels, std::span<const int> lights, std::span<const int> views, float* out) const;
 
   struct Impl;  // device buffers + host copy (fmf_cl.cpp)

@@ -2,6 +2,7 @@
 #include "codecs/lpca/clustering.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <numeric>
@@ -11,6 +12,7 @@
 #include <Eigen/Dense>
 
 #include "codecs/fmf/svd.h"
+#include "codecs/lpca/lpca_cl.h"
 
 namespace btfc::lpca {
 namespace {
@@ -238,66 +240,27 @@ void pca_step(const MapCF& X, const Index* members, Index n, int c, const MatF& 
   }
 }
 
-// Assignment buffers, reused across iterations (see Workspace).
-struct AssignBuffers {
-  MatF Wm;  // d x K(c+1): [mu_k E_k^T] of all clusters
-  std::vector<MatrixXfR> P;  // per thread: texel block x K(c+1), one texel's projections contiguous
-};
-
-// Assignment step; returns the number of texels moved and fills `err` with the estimated
-// error of each texel in its (new) cluster.
-int assign_step(const MapCF& X, const std::vector<Cluster>& cls, int c, const std::vector<double>& x2,
-                std::vector<uint32_t>& assign, std::vector<double>& err, AssignBuffers& ab) {
-  const Index d = X.rows(), N = X.cols(), K = Index(cls.size()), cols = c + 1;
-  ab.Wm.resize(d, K * cols);
-  ab.Wm.setZero();
-  Eigen::MatrixXd muE = Eigen::MatrixXd::Zero(K, c);
-  std::vector<double> mu2(size_t(K), 0);
+// Assignment step (lpca_cl.h: the OpenCL kernels or their C++ reference); returns the number of
+// texels moved and fills `err` with the estimated error of each texel in its (new) cluster.
+Result<int> assign_step(const MapCF& X, const std::vector<Cluster>& cls, int c, const std::vector<double>& x2,
+                        std::vector<uint32_t>& assign, std::vector<double>& err, MatF& Wm) {
+  const Index d = X.rows(), K = Index(cls.size()), cols = c + 1;
+  Wm.resize(d, K * cols);
+  Wm.setZero();
+  lpca_cl::AssignProblem pr;
+  pr.X = X.data(), pr.d = d, pr.N = X.cols(), pr.K = int(K), pr.c = c, pr.W = Wm.data(), pr.x2 = x2.data();
+  pr.margin = k_move_margin;
+  pr.mu2.assign(size_t(K), -1.0);  // -1: no basis, skipped
+  pr.muE.assign(size_t(K) * size_t(c), 0.0);
   for (Index k = 0; k < K; ++k) {
     if (!cls[size_t(k)].valid) continue;
-    ab.Wm.col(k * cols) = cls[size_t(k)].mean;
-    ab.Wm.middleCols(k * cols + 1, c) = cls[size_t(k)].E.transpose();
-    mu2[size_t(k)] = cls[size_t(k)].mean.cast<double>().squaredNorm();
-    for (int i = 0; i < c; ++i) muE(k, i) = cls[size_t(k)].E.row(i).cast<double>().dot(cls[size_t(k)].mean.cast<double>());
+    Wm.col(k * cols) = cls[size_t(k)].mean;
+    Wm.middleCols(k * cols + 1, c) = cls[size_t(k)].E.transpose();
+    pr.mu2[size_t(k)] = cls[size_t(k)].mean.cast<double>().squaredNorm();
+    for (int i = 0; i < c; ++i)
+      pr.muE[size_t(k) * size_t(c) + size_t(i)] = cls[size_t(k)].E.row(i).cast<double>().dot(cls[size_t(k)].mean.cast<double>());
   }
-  // Texel blocks in parallel, each block's GEMM single-threaded (Eigen does not nest inside an
-  // OpenMP region): one fork/join per step instead of Eigen's fine-grained GEMM synchronisation,
-  // which ran 3-15x slower than one thread when the 2-core machine was shared.
-  int moved = 0;
-  const Index tb = 512;
-  ab.P.resize(size_t(omp_get_max_threads()));
-#pragma omp parallel for schedule(dynamic, 1) reduction(+ : moved)
-  for (Index t0 = 0; t0 < N; t0 += tb) {
-    const Index nb = std::min(tb, N - t0);
-    MatrixXfR& P = ab.P[size_t(omp_get_thread_num())];
-    P.resize(tb, K * cols);
-    P.topRows(nb).noalias() = X.middleCols(t0, nb).transpose() * ab.Wm;  // nb x K(c+1)
-    for (Index i = 0; i < nb; ++i) {
-      const size_t t = size_t(t0 + i);
-      const uint32_t cur = assign[t];
-      double best = std::numeric_limits<double>::infinity(), cur_e = best;
-      uint32_t best_k = cur;
-      for (Index k = 0; k < K; ++k) {
-        if (!cls[size_t(k)].valid) continue;
-        double e = x2[t] - 2.0 * P(i, k * cols) + mu2[size_t(k)];
-        for (int j = 0; j < c; ++j) {
-          const double p = double(P(i, k * cols + 1 + j)) - muE(k, j);
-          e -= p * p;
-        }
-        e = std::max(0.0, e);
-        if (uint32_t(k) == cur) cur_e = e;
-        if (e < best) best = e, best_k = uint32_t(k);
-      }
-      if (best_k != cur && best < cur_e - k_move_margin * (x2[t] + mu2[best_k])) {
-        assign[t] = best_k;
-        err[t] = best;
-        ++moved;
-      } else {
-        err[t] = std::isfinite(cur_e) ? cur_e : best;
-      }
-    }
-  }
-  return moved;
+  return lpca_cl::assign(pr, assign.data(), err.data());
 }
 
 }  // namespace
@@ -324,7 +287,7 @@ Result<FitResult> fit_local_pca(const Btf& btf, const FitOptions& opt) {
   MatrixXfR weights = MatrixXfR::Zero(N, c);
   std::vector<Workspace> ws(static_cast<size_t>(omp_get_max_threads()));
   MatF omega;
-  AssignBuffers ab;
+  MatF Wm;  // the assignment step's stacked [mu_k E_k^T], reused
   std::vector<Index> order(static_cast<size_t>(N));  // texels sorted by cluster (counting sort)
   std::vector<Index> start(size_t(K) + 1);
   const Index l_max = std::min<Index>(c + k_oversample, d);
@@ -363,7 +326,9 @@ Result<FitResult> fit_local_pca(const Btf& btf, const FitOptions& opt) {
     res.sq_error.push_back(std::accumulate(err.begin(), err.end(), 0.0));
     if (opt.progress) opt.progress->advance();
     if (it + 1 == opt.iters) break;
-    int moved = assign_step(X, cls, c, x2, assign, err, ab);
+    const auto ta = std::chrono::steady_clock::now();
+    BTFC_ASSIGN_OR_RETURN(int moved, assign_step(X, cls, c, x2, assign, err, Wm));
+    res.assign_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - ta).count();
     moved += reseed_empty(assign, err, K, res.reseeded);
     res.changes.push_back(moved);
     if (moved == 0) {

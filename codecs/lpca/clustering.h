@@ -58,6 +58,7 @@ struct FitResult {
   int reseeded = 0;                   // empty clusters re-seeded, all iterations
   double total_energy = 0;            // ||B||_F^2
   bool converged = false;             // an assignment step changed nothing
+  double assign_seconds = 0;          // wall time in assignment steps (kernel or C++ reference)
 };
 
 Result<FitResult> fit_local_pca(const Btf& btf, const FitOptions& opt);

@@ -13,6 +13,7 @@
 #include <exception>
 
 #include "codecs/lpca/lpca.h"
+#include "codecs/lpca/lpca_cl.h"
 #include "codecs/lpca/lpca_model.h"
 
 namespace btfc {
@@ -145,15 +146,9 @@ Result<std::vector<float>> relight(const Model& model, const EnvironmentSH& env,
   w = d.width, h = d.height;
   const size_t n = d.num_texels();
   std::vector<float> out(n * 3);
-#pragma omp parallel for schedule(static)
-  for (size_t t = 0; t < n; ++t) {
-    const size_t r0 = size_t(m->cluster_of()[t]) * size_t(c + 1);
-    for (int ch = 0; ch < 3; ++ch) {
-      float s = L[r0 * 3 + size_t(ch)];
-      for (int i = 0; i < c; ++i) s += m->weights()(Eigen::Index(t), i) * L[(r0 + 1 + size_t(i)) * 3 + size_t(ch)];
-      out[t * 3 + size_t(ch)] = s;
-    }
-  }
+  // Per texel: the dot product of its reconstructed SH coefficients with the lighting, i.e.
+  // L[r0] + sum_i w_i L[r0 + i] (lpca_cl.h: OpenCL kernel or its C++ reference).
+  BTFC_RETURN_IF_ERROR(lpca_cl::relight(m->cluster_of(), m->weights().data(), c, L.data(), rows, out.data()));
   return out;
 }
 

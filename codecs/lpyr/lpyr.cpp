@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "codecs/fmf/svd.h"
+#include "codecs/lpyr/lpyr_cl.h"
 #include "codecs/lpyr/lpyr_internal.h"
 
 namespace btfc {
@@ -128,8 +129,8 @@ struct Encoder {
       for (int k = 0; k < lmax; ++k) {
         const LevelSize s = sizes[size_t(k)];
         next.assign(sizes[size_t(k) + 1].texels() * dd, 0.0f);
-        reduce(f.data(), s.w, s.h, dd, next.data());
-        subtract_up(f.data(), s.w, s.h, dd, next.data());
+        BTFC_RETURN_IF_ERROR(reduce_any(f.data(), s.w, s.h, dd, next.data()));  // lpyr_cl.h: kernel or reference
+        BTFC_RETURN_IF_ERROR(subtract_up_any(f.data(), s.w, s.h, dd, next.data()));
         BTFC_ASSIGN_OR_RETURN(Block b, pca(f.data(), dd, s.texels(), comps, lap_policy, nullptr, k, c));
         levels[size_t(k)].mean_stored[c] = b.mean.size() != 0;
         levels[size_t(k)].ch[c] = std::move(b);
