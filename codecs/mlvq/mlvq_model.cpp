@@ -162,8 +162,12 @@ Status MlvqModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
   return {};
 }
 
-// The batched decode: per texel, its whole grid by one recursive walk (each slice of the chain
-// visited once), converted to RGB, then every requested (light, view) blends its 16 nodes.
+// The batched decode. Every texel is (4D entry, scale) and a scale multiplies R, G and B alike
+// (chromaticity is scale-free), so the requested directions are evaluated once per *entry*:
+// its whole grid by one recursive walk of the codebook chain (each slice visited once),
+// converted to RGB, blended at the 16 nodes of every requested (light, view); then each texel
+// of the entry is its scale times that row. The per-texel cost is one scaled copy of the row,
+// so large BTFs (many texels per entry) decode at memory speed.
 Status MlvqModel::decode(const DecodeRequest& req, Btf& out) const {
   BTFC_ASSIGN_OR_RETURN(ResolvedRequest rr, resolve_request(m_desc, req));
   BTFC_RETURN_IF_ERROR(prepare_output(rr.desc, out));
@@ -185,19 +189,28 @@ Status MlvqModel::decode(const DecodeRequest& req, Btf& out) const {
                     3;
       }
     }
+  // Texels of the region grouped by their 4D entry (counting sort).
   const size_t w = size_t(rr.desc.width), n = rr.desc.num_texels(), rows = nl * nv * nc;
+  const uint32_t K4 = m_h.scheme == 4 ? m_h.merge_size() : m_h.rgb[4].K;
+  std::vector<uint32_t> start(size_t(K4) + 1, 0), order(n);
+  auto texel_of = [&](size_t i) { return (size_t(rr.x0) + i % w) + size_t(m_desc.width) * (size_t(rr.y0) + i / w); };
+  for (size_t i = 0; i < n; ++i) start[m_h.texel_idx[texel_of(i)] + 1]++;
+  for (size_t k = 0; k < K4; ++k) start[k + 1] += start[k];
+  {
+    std::vector<uint32_t> pos(start.begin(), start.end() - 1);
+    for (size_t i = 0; i < n; ++i) order[pos[m_h.texel_idx[texel_of(i)]]++] = uint32_t(i);
+  }
 #pragma omp parallel
   {
-    std::vector<float> lum(G), chroma(2 * G), rgb(3 * G);
-#pragma omp for schedule(dynamic, 4)
-    for (size_t i = 0; i < n; ++i) {
-      const size_t t = (size_t(rr.x0) + i % w) + size_t(m_desc.width) * (size_t(rr.y0) + i / w);
-      decode_texel(m_h, t, lum.data(), chroma.data());
+    std::vector<float> lum(G), chroma(2 * G), rgb(3 * G), row(rows);
+#pragma omp for schedule(dynamic, 1)
+    for (size_t e = 0; e < K4; ++e) {
+      if (start[e] == start[e + 1]) continue;
+      decode_slice(m_h, 4, k_rgb, uint32_t(e), 1.f, lum.data(), chroma.data());
       for (size_t j = 0; j < G; ++j) {
         const float lrg[3] = {lum[j], chroma[2 * j], chroma[2 * j + 1]};
         lrg_to_rgb(lrg, &rgb[3 * j]);
       }
-      float* dst = out.data() + i * rows;
       for (size_t r = 0; r < nl * nv; ++r) {
         const Tap& tp = taps[r];
         float a0 = 0, a1 = 0, a2 = 0;
@@ -206,7 +219,13 @@ Status MlvqModel::decode(const DecodeRequest& req, Btf& out) const {
           a0 += tp.w[m] * p[0], a1 += tp.w[m] * p[1], a2 += tp.w[m] * p[2];
         }
         const float v[3] = {a0, a1, a2};
-        for (size_t c = 0; c < nc; ++c) dst[r * nc + c] = v[c];
+        for (size_t c = 0; c < nc; ++c) row[r * nc + c] = v[c];
+      }
+      for (uint32_t k = start[e]; k < start[e + 1]; ++k) {
+        const size_t i = order[k];
+        const float sc = m_h.texel_scale[texel_of(i)];
+        float* dst = out.data() + i * rows;
+        for (size_t r = 0; r < rows; ++r) dst[r] = sc * row[r];
       }
     }
   }
