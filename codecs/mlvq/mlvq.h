@@ -1,7 +1,7 @@
 // Codec `mlvq`: multi-level vector quantization with SSIM, scale factors and Huffman-coded indices.
 //
-// Paper: V. Havran, J. Filip, K. Myszkowski et al., extension of "Bidirectional texture function
-// compression based on multi-level vector quantization" (CGF 2010) with adaptive colour
+// Paper: seed 003, an extension of Havran, Filip and Myszkowski 2010, "Bidirectional texture
+// function compression based on multi-level vector quantization", with adaptive colour
 // decomposition schemes, Huffman coding of indices and an OpenCL SSIM search
 // (../shared/seeds/003_e32f71d5a4e2baa5.txt, sections 3, 4.1-4.3, 5). The MLVQ database layout
 // it mirrors is ../shared/spec/formats.md section 2.5 (PDF1D / PDF2D / PDF3D / PDF4D / PDF6D).
