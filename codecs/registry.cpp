@@ -3,6 +3,7 @@
 #include "codecs/fmf/fmf.h"
 #include "codecs/lpca/lpca.h"
 #include "codecs/lpyr/lpyr.h"
+#include "codecs/mlvq/mlvq.h"
 
 namespace btfc {
 
@@ -11,6 +12,7 @@ std::span<const Codec* const> all_codecs() {
       &fmf_codec(),
       &lpyr_codec(),
       &lpca_codec(),
+      &mlvq_codec(),
   };
   return k_codecs;
 }

@@ -14,7 +14,8 @@ rm -f "$G"/*.btfc
 "$B" -q --device cpu compress "$G/input.btfc" -c fmf:rank=3:color=dfmf:chroma_rank=2:precision=float -o "$G/fmf_dfmf.btfc"
 "$B" -q --device cpu compress "$G/input.btfc" -c lpyr:y=4:c=1 -o "$G/lpyr.btfc"
 "$B" -q --device cpu compress "$G/input.btfc" -c lpca:clusters=3:components=2:iters=3 -o "$G/lpca.btfc"
-for m in fmf fmf_dfmf lpyr lpca; do
+"$B" -q --device cpu compress "$G/input.btfc" -c mlvq:scheme=2:phi=8:theta=4:alpha=7:beta=7 -o "$G/mlvq.btfc"
+for m in fmf fmf_dfmf lpyr lpca mlvq; do
   "$B" -q --device cpu decompress "$G/$m.btfc" -o "$G/$m.decoded.btfc"
 done
 ls -l "$G"

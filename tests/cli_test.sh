@@ -60,6 +60,17 @@ check bonn-convert 0 "$BTFC" convert "$W/m.btf" -o "$W/m2.btfc"
 check bonn-convert-back 0 "$BTFC" convert "$W/m2.btfc" -o "$W/m3.btf"
 check bonn-same 0 "$BTFC" --json compare "$W/m.btf" "$W/m3.btf"
 python3 -c "import json,sys; m=json.load(open(sys.argv[1])); assert m['rmse'] == 0, m; print('ok   bonn-convert-exact')" "$W/out.txt" || fails=$((fails + 1))
+# mlvq: compress (all four colour schemes, smallest kept) -> info -> decompress -> compare, eval.
+check mlvq-compress 0 "$BTFC" compress "$W/s.btfc" -c mlvq:phi=8:theta=4:alpha=7:beta=7 -o "$W/q.btfc"
+check mlvq-info 0 "$BTFC" info --verify "$W/q.btfc"
+expect_grep mlvq-info-huffman "huffman_gain" "$W/out.txt"
+check mlvq-decompress 0 "$BTFC" decompress "$W/q.btfc" -o "$W/qd.btfc"
+check mlvq-compare 0 "$BTFC" --json compare "$W/s.btfc" "$W/qd.btfc"
+python3 -c "import json,sys; m=json.load(open(sys.argv[1])); assert 0.01 < m['rel_l2'] < 0.4 and 0.3 < m['mean_ssim'] < 1, m; print('ok   mlvq-values', m['rel_l2'], m['mean_ssim'])" "$W/out.txt" || fails=$((fails + 1))
+check mlvq-eval-dir 0 "$BTFC" eval "$W/q.btfc" --texel 3,4 --wl 20,30 --wv 40,100
+head -c 300 "$W/q.btfc" > "$W/qtrunc.btfc"
+check mlvq-truncated 2 "$BTFC" decompress "$W/qtrunc.btfc" -o "$W/qt.btfc"
+expect_grep mlvq-truncated-msg "qtrunc.btfc" "$W/err.txt"
 head -c 40 "$W/m.btf" > "$W/trunc.btf"
 check bonn-truncated 2 "$BTFC" info "$W/trunc.btf"
 expect_grep bonn-truncated-msg "trunc.btf" "$W/err.txt"

@@ -18,7 +18,7 @@ using namespace btfc;
 namespace {
 
 const std::string k_dir = std::string(BTFC_SOURCE_DIR) + "/tests/golden/";
-const char* const k_models[] = {"fmf", "fmf_dfmf", "lpyr", "lpca"};
+const char* const k_models[] = {"fmf", "fmf_dfmf", "lpyr", "lpca", "mlvq"};
 
 std::vector<char> slurp(const std::string& p) {
   std::ifstream in(p, std::ios::binary);

@@ -1,0 +1,37 @@
+// Codec `mlvq`: multi-level vector quantization with SSIM, scale factors and Huffman-coded indices.
+//
+// Paper: seed 003, an extension of Havran, Filip and Myszkowski 2010, "Bidirectional texture
+// function compression based on multi-level vector quantization", with adaptive colour
+// decomposition schemes, Huffman coding of indices and an OpenCL SSIM search
+// (../shared/seeds/003_e32f71d5a4e2baa5.txt, sections 3, 4.1-4.3, 5). The MLVQ database layout
+// it mirrors is ../shared/spec/formats.md section 2.5 (PDF1D / PDF2D / PDF3D / PDF4D / PDF6D).
+//
+// Pipeline (mlvq_internal.h has the exact contracts):
+//  1. resample.cpp: every texel's ABRDF is resampled (9-lookup interpolation between measured
+//     directions, core/interp.h) onto a regular 4D grid phi_v x theta_v x alpha x beta
+//     (default 16 x 7 x 11 x 11, the paper's) and converted to luminance L = (R+G+B)/3 and
+//     chromaticity (r, g) = (R, G) / (R+G+B).
+//  2. codebook.cpp: top-down hierarchical VQ (4D -> 3D -> 2D -> 1D). A vector reuses the entry of
+//     the level's codebook that matches it best up to a least-squares scale when the SSIM is at
+//     least the level's threshold, else it becomes a new entry whose sub-slices go one level down.
+//     Luminance and chromaticity are split at level s (scheme s = 1..4) by a merge codebook M of
+//     (luminance index, chromaticity index) pairs; above s the codebooks hold RGB slices.
+//  3. Scales refitted bottom-up by least squares against the final reconstructions, quantized
+//     log-uniformly to 8 bits (LDR) or 16 bits (HDR, detected from the data range).
+//  4. huffman.cpp: each codebook's index stream is stored bit-packed in the minimal number of
+//     bits or canonical-Huffman coded (code table counted), whichever is smaller (section 4.2).
+//  5. mlvq_model.cpp: decoding by chained lookups with 4D multilinear interpolation, at measured
+//     or arbitrary directions; OpenCL batched evaluation (kernels/mlvq.cl, mlvq_cl.cpp).
+//
+// Parameters: scheme (best|1|2|3|4), ssim4..ssim1 (per-level thresholds), phi/theta/alpha/beta
+// (grid), huffman (auto|off), scale_bits (auto|8|16). `scheme=best` encodes with all four
+// schemes and keeps the smallest among those whose estimated quality (mean per-texel SSIM of
+// the resampled luminance) is within 0.005 of the best scheme's.
+#pragma once
+#include "codecs/codec.h"
+
+namespace btfc {
+
+const Codec& mlvq_codec();
+
+}  // namespace btfc

@@ -1,0 +1,448 @@
+// mlvq model: chained-lookup decoding with 4D interpolation, evaluation at measured and arbitrary
+// directions, storage (index streams plain or Huffman, scale codes, half level-1 values), loading
+// with validation, GPU tensors. Layouts in mlvq_internal.h; stored tensors listed at save().
+#include <Imath/half.h>
+
+#include <algorithm>
+#include <cmath>
+#include <mutex>
+
+#include "codecs/mlvq/mlvq_cl.h"
+#include "codecs/mlvq/mlvq_internal.h"
+#include "core/cl_runtime.h"
+
+namespace btfc::mlvq {
+
+namespace {
+
+const Book& book_of(const Hierarchy& h, Part p, int level) { return p == k_rgb ? h.rgb[level] : p == k_lum ? h.lum[level] : h.chroma[level]; }
+const char* const k_part_names[3] = {"rgb", "lum", "chroma"};
+std::string book_name(Part p, int k) { return std::string(k_part_names[p]) + std::to_string(k); }
+
+}  // namespace
+
+void decode_slice(const Hierarchy& h, int level, Part part, uint32_t idx, float sc, float* lum, float* chroma) {
+  if (part == k_rgb && level == h.scheme) {
+    decode_slice(h, level, k_lum, h.merge_lum[idx], sc, lum, nullptr);
+    if (chroma) decode_slice(h, level, k_chroma, h.merge_chroma[idx], 1.f, nullptr, chroma);
+    return;
+  }
+  const Book& b = book_of(h, part, level);
+  if (level == 1) {
+    const size_t nb = size_t(h.grid.nbeta);
+    if (part == k_lum) {
+      const float* v = &b.values[size_t(idx) * nb];
+      for (size_t j = 0; j < nb; ++j) lum[j] = sc * v[j];
+    } else {
+      std::copy_n(&b.values[size_t(idx) * 2 * nb], 2 * nb, chroma);
+    }
+    return;
+  }
+  const size_t n = b.n, len = h.grid.slice_len(level - 1);
+  for (size_t i = 0; i < n; ++i) {
+    const size_t o = size_t(idx) * n + i;
+    const float s2 = part == k_chroma ? 1.f : sc * b.scale[o];
+    decode_slice(h, level - 1, part, b.child[o], s2, lum ? lum + i * len : nullptr, chroma ? chroma + 2 * i * len : nullptr);
+  }
+}
+
+void decode_texel(const Hierarchy& h, size_t texel, float* lum, float* chroma) {
+  decode_slice(h, 4, k_rgb, h.texel_idx[texel], h.texel_scale[texel], lum, chroma);
+}
+
+void node_lrg(const Hierarchy& h, size_t texel, const int coord[5], float lrg[3]) {
+  const int s = h.scheme;
+  uint32_t e = h.texel_idx[texel];
+  float sc = h.texel_scale[texel];
+  for (int k = 4; k > s; --k) {
+    const Book& b = h.rgb[k];
+    const size_t o = size_t(e) * b.n + size_t(coord[k]);
+    sc *= b.scale[o];
+    e = b.child[o];
+  }
+  uint32_t li = h.merge_lum[e], ci = h.merge_chroma[e];
+  for (int k = s; k > 1; --k) {
+    const size_t o = size_t(li) * h.lum[k].n + size_t(coord[k]);
+    sc *= h.lum[k].scale[o];
+    li = h.lum[k].child[o];
+    ci = h.chroma[k].child[size_t(ci) * h.chroma[k].n + size_t(coord[k])];
+  }
+  const size_t nb = size_t(h.grid.nbeta);
+  lrg[0] = sc * h.lum[1].values[size_t(li) * nb + size_t(coord[1])];
+  lrg[1] = h.chroma[1].values[2 * (size_t(ci) * nb + size_t(coord[1]))];
+  lrg[2] = h.chroma[1].values[2 * (size_t(ci) * nb + size_t(coord[1])) + 1];
+}
+
+void eval_stencil(const Hierarchy& h, size_t texel, const Stencil& s, float rgb[3]) {
+  float acc[3] = {0, 0, 0}, v[3], lrg[3];
+  for (int m = 0; m < 16; ++m) {
+    const float w = s.w[0][m & 1] * s.w[1][(m >> 1) & 1] * s.w[2][(m >> 2) & 1] * s.w[3][(m >> 3) & 1];
+    if (w == 0) continue;
+    const int cd[5] = {0, s.i[0][m & 1], s.i[1][(m >> 1) & 1], s.i[2][(m >> 2) & 1], s.i[3][(m >> 3) & 1]};
+    node_lrg(h, texel, cd, lrg);
+    lrg_to_rgb(lrg, v);
+    for (int c = 0; c < 3; ++c) acc[c] += w * v[c];
+  }
+  std::copy(acc, acc + 3, rgb);
+}
+
+// ---------------------------------------------------------------------------------------------
+
+MlvqModel::MlvqModel(BtfDesc desc, std::string spec, Hierarchy h, bool huffman)
+    : m_desc(std::move(desc)), m_spec(std::move(spec)), m_h(std::move(h)), m_huffman(huffman) {
+  const size_t nl = m_desc.num_lights(), nv = m_desc.num_views();
+  m_measured.resize(nl * nv);
+  for (size_t v = 0; v < nv; ++v)
+    for (size_t l = 0; l < nl; ++l) m_measured[l + nl * v] = stencil(m_h.grid, grid_coord(m_h.grid, m_desc.lights.dirs[l], m_desc.views.dirs[v]));
+}
+
+void MlvqModel::eval(int x, int y, int light, int view, float* out) const {
+  float rgb[3];
+  eval_stencil(m_h, size_t(x) + size_t(m_desc.width) * size_t(y), m_measured[size_t(light) + m_desc.num_lights() * size_t(view)], rgb);
+  for (int c = 0; c < m_desc.channels; ++c) out[c] = rgb[c];
+}
+
+Status MlvqModel::eval_dir(int x, int y, const Vec3& wl, const Vec3& wv, float* out) const {
+  if (x < 0 || y < 0 || x >= m_desc.width || y >= m_desc.height)
+    return invalid_argument("texel (" + std::to_string(x) + ", " + std::to_string(y) + ") outside the BTF");
+  float rgb[3];
+  eval_stencil(m_h, size_t(x) + size_t(m_desc.width) * size_t(y), stencil(m_h.grid, grid_coord(m_h.grid, wl, wv)), rgb);
+  for (int c = 0; c < m_desc.channels; ++c) out[c] = rgb[c];
+  return {};
+}
+
+Status MlvqModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
+  const BtfDesc& d = m_desc;
+  const size_t nc = size_t(d.channels);
+  for (const EvalQuery& e : q)
+    if (e.x < 0 || e.y < 0 || e.x >= d.width || e.y >= d.height || (e.light >= 0) != (e.view >= 0) ||
+        (e.light >= 0 && (size_t(e.light) >= d.num_lights() || size_t(e.view) >= d.num_views())))
+      return invalid_argument("eval query (" + std::to_string(e.x) + ", " + std::to_string(e.y) + ", light " + std::to_string(e.light) +
+                              ", view " + std::to_string(e.view) + ") is outside the BTF");
+  if (ocl::use_opencl()) {
+    std::shared_ptr<DeviceModel> dev;
+    Status st;
+    {
+      std::lock_guard<std::mutex> lock(m_dev_mu);
+      if (!m_dev) {
+        auto up = DeviceModel::upload(flatten(m_h));
+        if (up.ok()) m_dev = up.value();
+        else st = up.status();
+      }
+      dev = m_dev;
+    }
+    if (dev) {
+      std::vector<int> texel(q.size());
+      std::vector<float> coord(4 * q.size()), rgb(3 * q.size());
+#pragma omp parallel for schedule(static)
+      for (size_t i = 0; i < q.size(); ++i) {
+        texel[i] = q[i].x + d.width * q[i].y;
+        const GridCoord c = q[i].light >= 0 ? grid_coord(m_h.grid, d.lights.dirs[size_t(q[i].light)], d.views.dirs[size_t(q[i].view)])
+                                            : grid_coord(m_h.grid, q[i].wl, q[i].wv);
+        coord[4 * i] = c.phi, coord[4 * i + 1] = c.theta, coord[4 * i + 2] = c.alpha, coord[4 * i + 3] = c.beta;
+      }
+      st = dev->eval(texel, coord, rgb.data());
+      if (st.ok()) {
+        for (size_t i = 0; i < q.size(); ++i)
+          for (size_t c = 0; c < nc; ++c) out[i * nc + c] = rgb[3 * i + c];
+        return {};
+      }
+    }
+    if (!ocl::fall_back_after(st)) return st;
+  }
+#pragma omp parallel for schedule(static)
+  for (size_t i = 0; i < q.size(); ++i) {
+    const size_t t = size_t(q[i].x) + size_t(d.width) * size_t(q[i].y);
+    const Stencil s = q[i].light >= 0 ? m_measured[size_t(q[i].light) + d.num_lights() * size_t(q[i].view)]
+                                      : stencil(m_h.grid, grid_coord(m_h.grid, q[i].wl, q[i].wv));
+    float rgb[3];
+    eval_stencil(m_h, t, s, rgb);
+    for (size_t c = 0; c < nc; ++c) out[i * nc + c] = rgb[c];
+  }
+  return {};
+}
+
+// The batched decode. Every texel is (4D entry, scale) and a scale multiplies R, G and B alike
+// (chromaticity is scale-free), so the requested directions are evaluated once per *entry*:
+// its whole grid by one recursive walk of the codebook chain (each slice visited once),
+// converted to RGB, blended at the 16 nodes of every requested (light, view); then each texel
+// of the entry is its scale times that row. The per-texel cost is one scaled copy of the row,
+// so large BTFs (many texels per entry) decode at memory speed.
+Status MlvqModel::decode(const DecodeRequest& req, Btf& out) const {
+  BTFC_ASSIGN_OR_RETURN(ResolvedRequest rr, resolve_request(m_desc, req));
+  BTFC_RETURN_IF_ERROR(prepare_output(rr.desc, out));
+  const Grid& g = m_h.grid;
+  const size_t G = g.size(), nl = rr.lights.size(), nv = rr.views.size(), nc = size_t(m_desc.channels);
+  struct Tap {
+    uint32_t node[16];
+    float w[16];
+  };
+  std::vector<Tap> taps(nl * nv);
+  for (size_t v = 0; v < nv; ++v)
+    for (size_t l = 0; l < nl; ++l) {
+      const Stencil& s = m_measured[size_t(rr.lights[l]) + m_desc.num_lights() * size_t(rr.views[v])];
+      Tap& t = taps[l + nl * v];
+      for (int m = 0; m < 16; ++m) {
+        t.w[m] = s.w[0][m & 1] * s.w[1][(m >> 1) & 1] * s.w[2][(m >> 2) & 1] * s.w[3][(m >> 3) & 1];
+        t.node[m] = uint32_t(size_t(s.i[0][m & 1]) +
+                             size_t(g.nbeta) * (size_t(s.i[1][(m >> 1) & 1]) + size_t(g.nalpha) * (size_t(s.i[2][(m >> 2) & 1]) + size_t(g.ntheta) * size_t(s.i[3][(m >> 3) & 1])))) *
+                    3;
+      }
+    }
+  // Texels of the region grouped by their 4D entry (counting sort).
+  const size_t w = size_t(rr.desc.width), n = rr.desc.num_texels(), rows = nl * nv * nc;
+  const uint32_t K4 = m_h.scheme == 4 ? m_h.merge_size() : m_h.rgb[4].K;
+  std::vector<uint32_t> start(size_t(K4) + 1, 0), order(n);
+  auto texel_of = [&](size_t i) { return (size_t(rr.x0) + i % w) + size_t(m_desc.width) * (size_t(rr.y0) + i / w); };
+  for (size_t i = 0; i < n; ++i) start[m_h.texel_idx[texel_of(i)] + 1]++;
+  for (size_t k = 0; k < K4; ++k) start[k + 1] += start[k];
+  {
+    std::vector<uint32_t> pos(start.begin(), start.end() - 1);
+    for (size_t i = 0; i < n; ++i) order[pos[m_h.texel_idx[texel_of(i)]]++] = uint32_t(i);
+  }
+#pragma omp parallel
+  {
+    std::vector<float> lum(G), chroma(2 * G), rgb(3 * G), row(rows);
+#pragma omp for schedule(dynamic, 1)
+    for (size_t e = 0; e < K4; ++e) {
+      if (start[e] == start[e + 1]) continue;
+      decode_slice(m_h, 4, k_rgb, uint32_t(e), 1.f, lum.data(), chroma.data());
+      for (size_t j = 0; j < G; ++j) {
+        const float lrg[3] = {lum[j], chroma[2 * j], chroma[2 * j + 1]};
+        lrg_to_rgb(lrg, &rgb[3 * j]);
+      }
+      for (size_t r = 0; r < nl * nv; ++r) {
+        const Tap& tp = taps[r];
+        float a0 = 0, a1 = 0, a2 = 0;
+        for (int m = 0; m < 16; ++m) {
+          const float* p = &rgb[tp.node[m]];
+          a0 += tp.w[m] * p[0], a1 += tp.w[m] * p[1], a2 += tp.w[m] * p[2];
+        }
+        const float v[3] = {a0, a1, a2};
+        for (size_t c = 0; c < nc; ++c) row[r * nc + c] = v[c];
+      }
+      for (uint32_t k = start[e]; k < start[e + 1]; ++k) {
+        const size_t i = order[k];
+        const float sc = m_h.texel_scale[texel_of(i)];
+        float* dst = out.data() + i * rows;
+        for (size_t r = 0; r < rows; ++r) dst[r] = sc * row[r];
+      }
+    }
+  }
+  return {};
+}
+
+// ---- storage -------------------------------------------------------------------------------------
+// Tensors: "mlvq" u32 [8] = scheme, nphi, ntheta, nalpha, nbeta, scale_bits, |M|, 0;
+// "books" u32 [3, 5] = K per part (rgb, lum, chroma) and level (column 0 unused);
+// "<part><k>.idx" u8 coded child indices (levels >= 2), "<part><k>.scale" u8/u16 codes and
+// "<part><k>.range" f32 [2] (rgb and lum), "lum1.values" f16 [K, nbeta], "chroma1.values" f16
+// [K, nbeta, 2], "merge.lum" / "merge.chroma" u8 coded, "texel.idx" u8 coded, "texel.scale",
+// "texel.range".
+
+namespace {
+
+Tensor bytes_tensor(const std::string& name, std::vector<uint8_t> b) {
+  Tensor t;
+  t.name = name;
+  t.dtype = DType::u8;
+  t.shape = {uint64_t(b.size())};
+  t.bytes = std::move(b);
+  return t;
+}
+
+Tensor codes_tensor(const std::string& name, const std::vector<uint16_t>& c, int bits) {
+  Tensor t;
+  t.name = name;
+  t.dtype = bits <= 8 ? DType::u8 : DType::u16;
+  t.shape = {uint64_t(c.size())};
+  for (uint16_t x : c) {
+    t.bytes.push_back(uint8_t(x & 0xff));
+    if (bits > 8) t.bytes.push_back(uint8_t(x >> 8));
+  }
+  return t;
+}
+
+Tensor half_tensor(const std::string& name, std::vector<uint64_t> shape, const std::vector<float>& v) {
+  Tensor t;
+  t.name = name;
+  t.dtype = DType::f16;
+  t.shape = std::move(shape);
+  for (float x : v) {
+    const uint16_t b = Imath::half(x).bits();
+    t.bytes.push_back(uint8_t(b & 0xff)), t.bytes.push_back(uint8_t(b >> 8));
+  }
+  return t;
+}
+
+uint32_t child_alphabet(const Hierarchy& h, Part p, int level) {  // size of the book level-1 points into
+  if (p == k_rgb && level - 1 == h.scheme) return h.merge_size();
+  return book_of(h, p, level - 1).K;
+}
+
+}  // namespace
+
+std::vector<Tensor> MlvqModel::tensors(bool allow_huffman, uint64_t* plain_bytes) const {
+  const Hierarchy& h = m_h;
+  std::vector<Tensor> ts;
+  uint64_t plain = 0;
+  auto coded = [&](const std::string& name, const std::vector<uint32_t>& v, uint32_t alphabet) {
+    CodedStream cs = encode_indices(v, alphabet, allow_huffman);
+    plain += cs.plain_bytes;
+    ts.push_back(bytes_tensor(name, std::move(cs.bytes)));
+  };
+  auto other = [&](Tensor t) {
+    plain += t.bytes.size();
+    ts.push_back(std::move(t));
+  };
+  const uint32_t hdr[8] = {uint32_t(h.scheme), uint32_t(h.grid.nphi), uint32_t(h.grid.ntheta), uint32_t(h.grid.nalpha),
+                           uint32_t(h.grid.nbeta), uint32_t(h.scale_bits), h.merge_size(), 0};
+  other(Tensor::from_u32("mlvq", {8}, hdr));
+  uint32_t books[15] = {0};
+  for (int p = 0; p < 3; ++p)
+    for (int k = 1; k <= 4; ++k) books[5 * p + k] = book_of(h, Part(p), k).K;
+  other(Tensor::from_u32("books", {3, 5}, books));
+  for (int p = 0; p < 3; ++p)
+    for (int k = 2; k <= 4; ++k) {
+      const Book& b = book_of(h, Part(p), k);
+      if (b.K == 0) continue;
+      coded(book_name(Part(p), k) + ".idx", b.child, child_alphabet(h, Part(p), k));
+      if (p != k_chroma) {
+        other(codes_tensor(book_name(Part(p), k) + ".scale", b.scode, h.scale_bits));
+        const float r[2] = {b.lo, b.hi};
+        other(Tensor::from_f32(book_name(Part(p), k) + ".range", {2}, r));
+      }
+    }
+  other(half_tensor("lum1.values", {h.lum[1].K, uint64_t(h.grid.nbeta)}, h.lum[1].values));
+  other(half_tensor("chroma1.values", {h.chroma[1].K, uint64_t(h.grid.nbeta), 2}, h.chroma[1].values));
+  coded("merge.lum", h.merge_lum, h.lum[h.scheme].K);
+  coded("merge.chroma", h.merge_chroma, h.chroma[h.scheme].K);
+  coded("texel.idx", h.texel_idx, h.scheme == 4 ? h.merge_size() : h.rgb[4].K);
+  other(codes_tensor("texel.scale", h.texel_scode, h.scale_bits));
+  const float r[2] = {h.texel_lo, h.texel_hi};
+  other(Tensor::from_f32("texel.range", {2}, r));
+  if (plain_bytes) *plain_bytes = plain;
+  return ts;
+}
+
+Status MlvqModel::save(ContainerWriter& w) const {
+  for (Tensor& t : tensors(m_huffman, nullptr)) w.add_tensor(std::move(t));
+  return {};
+}
+
+uint64_t MlvqModel::payload_bytes() const {
+  uint64_t n = 0;
+  for (const Tensor& t : tensors(m_huffman, nullptr)) n += t.bytes.size();
+  return n;
+}
+
+uint64_t MlvqModel::plain_payload_bytes() const {
+  uint64_t plain = 0;
+  (void)tensors(false, &plain);
+  return plain;
+}
+
+Result<std::vector<Tensor>> MlvqModel::gpu_tensors() const {
+  const Hierarchy& h = m_h;
+  std::vector<Tensor> out;
+  const uint32_t grid[5] = {uint32_t(h.scheme), uint32_t(h.grid.nphi), uint32_t(h.grid.ntheta), uint32_t(h.grid.nalpha), uint32_t(h.grid.nbeta)};
+  out.push_back(Tensor::from_u32("grid", {5}, grid));
+  out.push_back(Tensor::from_u32("texel_index", {uint64_t(m_desc.height), uint64_t(m_desc.width)}, h.texel_idx.data()));
+  out.push_back(Tensor::from_f32("texel_scale", {uint64_t(m_desc.height), uint64_t(m_desc.width)}, h.texel_scale.data()));
+  for (int p = 0; p < 3; ++p)
+    for (int k = 2; k <= 4; ++k) {
+      const Book& b = book_of(h, Part(p), k);
+      if (b.K == 0) continue;
+      out.push_back(Tensor::from_u32(book_name(Part(p), k) + "_index", {b.K, b.n}, b.child.data()));
+      if (p != k_chroma) out.push_back(Tensor::from_f32(book_name(Part(p), k) + "_scale", {b.K, b.n}, b.scale.data()));
+    }
+  std::vector<uint32_t> m;
+  for (size_t i = 0; i < h.merge_lum.size(); ++i) m.push_back(h.merge_lum[i]), m.push_back(h.merge_chroma[i]);
+  out.push_back(Tensor::from_u32("merge", {h.merge_size(), 2}, m.data()));
+  out.push_back(Tensor::from_f32("lum1", {h.lum[1].K, uint64_t(h.grid.nbeta)}, h.lum[1].values.data()));
+  out.push_back(Tensor::from_f32("chroma1", {h.chroma[1].K, uint64_t(h.grid.nbeta), 2}, h.chroma[1].values.data()));
+  return out;
+}
+
+Result<std::unique_ptr<Model>> MlvqModel::load(const ContainerReader& rd, const Params& p) {
+  const BtfDesc& d = rd.desc();
+  auto bad = [&](const std::string& what) { return corrupt_data(rd.path() + ": mlvq " + what); };
+  if (d.channels != 3 && d.channels != 1) return bad("model with " + std::to_string(d.channels) + " channels (needs 1 or 3)");
+  BTFC_ASSIGN_OR_RETURN(Tensor ht, rd.read_checked("mlvq", DType::u32, {8}));
+  uint32_t hdr[8];
+  std::copy(ht.bytes.begin(), ht.bytes.end(), reinterpret_cast<uint8_t*>(hdr));
+  Hierarchy h;
+  h.scheme = int(hdr[0]);
+  if (h.scheme < 1 || h.scheme > 4) return bad("scheme " + std::to_string(hdr[0]) + " outside 1..4");
+  for (int i = 1; i <= 4; ++i)
+    if (hdr[i] < 1 || hdr[i] > 64) return bad("grid axis " + std::to_string(i) + " has " + std::to_string(hdr[i]) + " nodes (1..64)");
+  h.grid.nphi = int(hdr[1]), h.grid.ntheta = int(hdr[2]), h.grid.nalpha = int(hdr[3]), h.grid.nbeta = int(hdr[4]);
+  if (hdr[5] != 8 && hdr[5] != 16) return bad("scale bits " + std::to_string(hdr[5]) + " (8 or 16)");
+  h.scale_bits = int(hdr[5]);
+  const uint32_t M = hdr[6];
+  BTFC_ASSIGN_OR_RETURN(Tensor bt, rd.read_checked("books", DType::u32, {3, 5}));
+  uint32_t books[15];
+  std::copy(bt.bytes.begin(), bt.bytes.end(), reinterpret_cast<uint8_t*>(books));
+  constexpr uint32_t k_max_k = 1u << 28;
+  for (int p = 0; p < 3; ++p)
+    for (int k = 1; k <= 4; ++k) {
+      const uint32_t K = books[5 * p + k];
+      const bool want = p == k_rgb ? k > h.scheme : k <= h.scheme;
+      if (want != (K > 0) || K > k_max_k)
+        return bad("codebook " + book_name(Part(p), k) + " has " + std::to_string(K) + " entries (scheme " + std::to_string(h.scheme) + ")");
+      Book& b = p == k_rgb ? h.rgb[k] : p == k_lum ? h.lum[k] : h.chroma[k];
+      b.K = K;
+      b.n = uint32_t(h.grid.n(k));
+    }
+  if (M == 0 || M > k_max_k || uint64_t(M) > uint64_t(h.lum[h.scheme].K) * h.chroma[h.scheme].K)
+    return bad("merge codebook of " + std::to_string(M) + " entries");
+  const uint64_t N = d.num_texels();
+  auto read_idx = [&](const std::string& name, size_t count, uint32_t alphabet) -> Result<std::vector<uint32_t>> {
+    BTFC_ASSIGN_OR_RETURN(Tensor t, rd.read_checked(name, DType::u8, {}));
+    return decode_indices(t.bytes, count, alphabet, rd.path() + ": mlvq tensor '" + name + "'");
+  };
+  auto read_scales = [&](const std::string& name, size_t count, std::vector<uint16_t>& codes, std::vector<float>& v, float& lo,
+                         float& hi) -> Status {
+    BTFC_ASSIGN_OR_RETURN(Tensor t, rd.read_checked(name + ".scale", h.scale_bits == 8 ? DType::u8 : DType::u16, {uint64_t(count)}));
+    BTFC_ASSIGN_OR_RETURN(Tensor r, rd.read_checked(name + ".range", DType::f32, {2}));
+    BTFC_ASSIGN_OR_RETURN(std::vector<float> rv, r.to_f32());
+    lo = rv[0], hi = rv[1];
+    if (!std::isfinite(lo) || !std::isfinite(hi) || lo > hi || hi > 88.f || lo < -104.f) return bad("tensor '" + name + ".range' is not a valid log range");
+    codes.resize(count);
+    v.resize(count);
+    for (size_t i = 0; i < count; ++i) {
+      codes[i] = h.scale_bits == 8 ? t.bytes[i] : uint16_t(t.bytes[2 * i] | (t.bytes[2 * i + 1] << 8));
+      v[i] = dequantize_scale(codes[i], lo, hi, h.scale_bits);
+    }
+    return {};
+  };
+  for (int p = 0; p < 3; ++p)
+    for (int k = 2; k <= 4; ++k) {
+      Book& b = p == k_rgb ? h.rgb[k] : p == k_lum ? h.lum[k] : h.chroma[k];
+      if (b.K == 0) continue;
+      const uint32_t alpha = (p == k_rgb && k - 1 == h.scheme) ? M : book_of(h, Part(p), k - 1).K;
+      BTFC_ASSIGN_OR_RETURN(b.child, read_idx(book_name(Part(p), k) + ".idx", size_t(b.K) * b.n, alpha));
+      if (p != k_chroma) BTFC_RETURN_IF_ERROR(read_scales(book_name(Part(p), k), size_t(b.K) * b.n, b.scode, b.scale, b.lo, b.hi));
+    }
+  const uint64_t nb = uint64_t(h.grid.nbeta);
+  {
+    BTFC_ASSIGN_OR_RETURN(Tensor t, rd.read_checked("lum1.values", DType::f16, {h.lum[1].K, nb}));
+    BTFC_ASSIGN_OR_RETURN(h.lum[1].values, t.to_f32());
+    BTFC_ASSIGN_OR_RETURN(Tensor c, rd.read_checked("chroma1.values", DType::f16, {h.chroma[1].K, nb, 2}));
+    BTFC_ASSIGN_OR_RETURN(h.chroma[1].values, c.to_f32());
+    for (float x : h.lum[1].values)
+      if (!std::isfinite(x)) return bad("tensor 'lum1.values' holds non-finite values");
+    for (float x : h.chroma[1].values)
+      if (!std::isfinite(x)) return bad("tensor 'chroma1.values' holds non-finite values");
+  }
+  BTFC_ASSIGN_OR_RETURN(h.merge_lum, read_idx("merge.lum", M, h.lum[h.scheme].K));
+  BTFC_ASSIGN_OR_RETURN(h.merge_chroma, read_idx("merge.chroma", M, h.chroma[h.scheme].K));
+  BTFC_ASSIGN_OR_RETURN(h.texel_idx, read_idx("texel.idx", N, h.scheme == 4 ? M : h.rgb[4].K));
+  BTFC_RETURN_IF_ERROR(read_scales("texel", N, h.texel_scode, h.texel_scale, h.texel_lo, h.texel_hi));
+  const bool huffman = p.get("huffman") != "off";
+  auto model = std::make_unique<MlvqModel>(d, p.canonical(), std::move(h), huffman);
+  model->mutable_stats().add("scheme", model->hierarchy().scheme);
+  return std::unique_ptr<Model>(std::move(model));
+}
+
+}  // namespace btfc::mlvq
