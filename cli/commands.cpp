@@ -247,6 +247,7 @@ int cmd_info(const Global& g, const std::string& path, bool verify) {
 }
 
 int cmd_compress(const Global& g, const CompressArgs& a) {
+  if (int code = 0; compress_streamed(g, a, code)) return code;
   auto resolved = resolve_spec(a.spec);
   if (!resolved.ok()) return fail(g, resolved.status());
   auto [codec, params] = std::move(resolved).value();
@@ -282,6 +283,7 @@ int cmd_compress(const Global& g, const CompressArgs& a) {
 }
 
 int cmd_decompress(const Global& g, const DecompressArgs& a) {
+  if (int code = 0; decompress_streamed(g, a, code)) return code;
   auto model = open_model(a.in);
   if (!model.ok()) return fail(g, model.status());
   DecodeRequest req;
@@ -417,6 +419,7 @@ int cmd_convert(const Global& g, const ConvertArgs& a) {
 }
 
 int cmd_bench(const Global& g, const BenchArgs& a) {
+  if (int code = 0; bench_streamed(g, a, code)) return code;
   auto btf = read_btf(a.in);
   if (!btf.ok()) return fail(g, btf.status());
   const std::string label = a.label.empty() ? a.in : a.label;

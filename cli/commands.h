@@ -30,6 +30,8 @@ struct SynthArgs {
 struct CompressArgs {
   std::string in, out, spec;
   unsigned long long seed = 1;
+  std::string max_memory;  // --max-memory SIZE ("" = default_max_memory())
+  std::string work_file;   // --work-file PATH: keep / reuse the out-of-core working file
 };
 
 struct DecompressArgs {
@@ -38,6 +40,7 @@ struct DecompressArgs {
   std::string lights, views;        // "0,3,5"
   std::string format = "exr";
   double lod = 0;                   // level of detail (lpyr); 0 = full detail
+  std::string max_memory;
 };
 
 struct EvalArgs {
@@ -69,6 +72,7 @@ struct BenchArgs {
   std::string label;
   bool header = true;
   unsigned long long seed = 1;
+  std::string max_memory;
 };
 
 // Applies --device (auto | cpu | cl) to the process (core/cl_runtime.h).
@@ -85,5 +89,11 @@ int cmd_compare(const Global& g, const CompareArgs& a);
 int cmd_relight(const Global& g, const RelightArgs& a);
 int cmd_convert(const Global& g, const ConvertArgs& a);
 int cmd_bench(const Global& g, const BenchArgs& a);
+
+// Bounded memory (cli/stream_commands.cpp): each returns true when it handled the command
+// (the BTF does not fit in --max-memory, or the output is a streamed Bonn BDI), with `code` set.
+bool compress_streamed(const Global& g, const CompressArgs& a, int& code);
+bool decompress_streamed(const Global& g, const DecompressArgs& a, int& code);
+bool bench_streamed(const Global& g, const BenchArgs& a, int& code);
 
 }  // namespace btfc::cli

@@ -53,6 +53,8 @@ int main(int argc, char** argv) {
   compress->add_option("-c,--codec", ca.spec, "codec spec string, e.g. fmf:rank=32:precision=half")->required();
   compress->add_option("-o,--output", ca.out, "output .btfc, or .btf (Bonn DFMF / FMF, fmf models)")->required();
   compress->add_option("--seed", ca.seed, "random seed (randomized algorithms)");
+  compress->add_option("--max-memory", ca.max_memory, "BTF data held in memory at most (e.g. 2G; default 80% of available RAM); larger inputs stream (fmf)");
+  compress->add_option("--work-file", ca.work_file, "out-of-core working file (a Bonn BDI .btf), kept and reused; default: a temporary next to the output");
   compress->callback([&] { code = cmd_compress(g, ca); });
 
   DecompressArgs da;
@@ -63,6 +65,7 @@ int main(int argc, char** argv) {
   decompress->add_option("--lights", da.lights, "comma-separated light indices");
   decompress->add_option("--views", da.views, "comma-separated view indices");
   decompress->add_option("--format", da.format, "image-set format")->check(CLI::IsMember({"exr", "png"}));
+  decompress->add_option("--max-memory", da.max_memory, "decoded data held in memory at most; -o OUT.btf (Bonn BDI) streams");
   decompress->add_option("--lod", da.lod, "level of detail (lpyr): 0 = full detail")->check(CLI::Range(0.0, 64.0));
   decompress->callback([&] { code = cmd_decompress(g, da); });
 
@@ -116,6 +119,7 @@ int main(int argc, char** argv) {
   bench->add_option("-c,--codec", ba.specs, "codec spec (repeatable)")->required();
   bench->add_option("--label", ba.label, "data label in the table");
   bench->add_option("--seed", ba.seed, "random seed");
+  bench->add_option("--max-memory", ba.max_memory, "BTF data held in memory at most; larger inputs stream (fmf; no SSIM)");
   bench->add_flag("--no-header", no_header, "omit the table header");
   bench->callback([&] {
     ba.header = !no_header;
