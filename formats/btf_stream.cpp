@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <future>
 
 #include "core/container.h"
 #include "formats/bonn/bdi_work.h"
@@ -162,20 +163,32 @@ Status fill(const std::string& input, BdiWriter& w, const BtfDesc& d, size_t max
   }
   if (is_raw_btfc(input, nullptr)) {
     BTFC_ASSIGN_OR_RETURN(RawBands rb, RawBands::open(input));
-    const uint64_t lines = band_lines(d, 4, max_bytes);
-    std::vector<float> buf(lines * width * d.abrdf_size());
-    if (progress) progress->start("working file (raw texel bands)", (uint64_t(d.height) + lines - 1) / lines);
-    for (uint64_t y = 0; y < uint64_t(d.height); y += lines) {
-      const uint64_t n = std::min(lines, uint64_t(d.height) - y) * width;
-      BTFC_RETURN_IF_ERROR(rb.read(y * width, n, buf.data()));
-      BTFC_RETURN_IF_ERROR(w.write_texels(y * width, n, buf.data()));
+    // Two float bands (the next one is read on a helper thread while this one is converted and
+    // written) and the half copy of one band: 10 B/value.
+    const uint64_t lines = band_lines(d, 10, max_bytes);
+    std::vector<float> buf[2];
+    buf[0].resize(lines * width * d.abrdf_size());
+    buf[1].resize(buf[0].size());
+    const uint64_t bands = (uint64_t(d.height) + lines - 1) / lines;
+    auto count = [&](uint64_t b) { return std::min(lines, uint64_t(d.height) - b * lines) * width; };
+    auto read = [&](uint64_t b) { return std::async(std::launch::async, [&, b] { return rb.read(b * lines * width, count(b), buf[b % 2].data()); }); };
+    if (progress) progress->start("working file (raw texel bands)", bands);
+    std::future<Status> next = read(0);
+    for (uint64_t b = 0; b < bands; ++b) {
+      Status s = next.get();
+      if (s.ok() && b + 1 < bands) next = read(b + 1);
+      if (s.ok()) s = w.write_texels(b * lines * width, count(b), buf[b % 2].data());
+      if (!s.ok()) {
+        if (next.valid()) (void)next.get();
+        return s;
+      }
       if (progress) progress->advance();
     }
     if (progress) progress->finish();
     return {};
   }
   BTFC_ASSIGN_OR_RETURN(auto model, open_model(input));
-  const uint64_t lines = band_lines(d, 4, max_bytes);
+  const uint64_t lines = band_lines(d, 6, max_bytes);
   Btf band;
   if (progress) progress->start("working file (decoded texel bands)", (uint64_t(d.height) + lines - 1) / lines);
   for (uint64_t y = 0; y < uint64_t(d.height); y += lines) {

@@ -45,7 +45,7 @@ print("ok   same-model-n%d rel_l2 %.3g" % (n, m["rel_l2"]))
 PY
 done
 check compare-to-source 0 "$BTFC" --json compare --no-ssim "$W/s.btfc" "$W/mpi3.btfc"
-python3 -c "import json; m=json.load(open('$W/out.txt')); assert 1e-3 < m['rel_l2'] < 0.3, m; print('ok   mpi-model-error', m['rel_l2'])" || fails=$((fails + 1))
+python3 -c "import json; m=json.load(open('$W/out.txt')); assert 1e-3 < m['rel_l2'] < 0.6, m; print('ok   mpi-model-error', m['rel_l2'])" || fails=$((fails + 1))
 
 # A NaN in the last chunk (read by the last rank only): all ranks stop with its message.
 cp "$W/w.btf" "$W/bad.btf"

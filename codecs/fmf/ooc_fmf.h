@@ -39,8 +39,8 @@ class BdiChunkSource final : public fmf::ChunkSource {
 // Bytes the streaming SVD holds besides its chunk buffers (Y, Q, the sums, W^T, SxV) for a
 // matrix of m rows, n texels and a sketch of l columns.
 uint64_t streaming_fixed_bytes(uint64_t m, uint64_t n, uint64_t l);
-// Bytes per matrix value the chunk buffers take (two raw half buffers + one float block): 8.
-inline constexpr uint64_t k_stream_bytes_per_value = 8;
+// Bytes per matrix value the chunk buffers take (one raw half buffer + two float blocks): 10.
+inline constexpr uint64_t k_stream_bytes_per_value = 10;
 // Scan lines per working-file chunk so that the chunk buffers plus the fixed part fit in
 // max_bytes; 0 when even one scan line does not fit. Capped at 256 MiB of float per chunk
 // (bigger chunks gain nothing and leave fewer chunks to overlap reading with).

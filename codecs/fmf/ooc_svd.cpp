@@ -43,27 +43,33 @@ void gaussian_rows(uint64_t seed, size_t first, size_t count, Index l, MatrixXf&
 }
 
 struct Buffers {
-  std::vector<uint8_t> raw[2];
-  std::vector<float> block;
+  std::vector<uint8_t> raw;
+  std::vector<float> block[2];
 };
 
-// Reads the owned chunks in order, the next one on a helper thread while `fn` works on the
-// current one. Stops at the first failure (after the helper finished).
+// Reads and decodes the owned chunks in order on a helper thread, one chunk ahead of `fn`,
+// which multiplies the previous one. The helper does all the I/O and the conversion, so the
+// main thread only runs GEMMs (no OpenMP region between them whose spinning threads would
+// compete with the BLAS threads). Stops at the first failure (after the helper finished).
 Status for_each_chunk(const ChunkSource& src, const std::vector<size_t>& chunks, Buffers& b, StreamStats& st,
                       const std::function<void(size_t c, const float* B, size_t count)>& fn) {
   if (chunks.empty()) return {};
-  auto read = [&](size_t i) { return std::async(std::launch::async, [&src, &b, &chunks, i] { return src.read(chunks[i], b.raw[i % 2].data()); }); };
-  std::future<Status> next = read(0);
+  auto load = [&](size_t i) {
+    return std::async(std::launch::async, [&src, &b, &chunks, i] {
+      Status s = src.read(chunks[i], b.raw.data());
+      return s.ok() ? src.decode(chunks[i], b.raw.data(), b.block[i % 2].data()) : s;
+    });
+  };
+  std::future<Status> next = load(0);
   for (size_t i = 0; i < chunks.size(); ++i) {
     Status s = next.get();
-    if (i + 1 < chunks.size() && s.ok()) next = read(i + 1);
-    if (s.ok()) s = src.decode(chunks[i], b.raw[i % 2].data(), b.block.data());
+    if (i + 1 < chunks.size() && s.ok()) next = load(i + 1);
     if (!s.ok()) {
       if (next.valid()) (void)next.get();
       return s;
     }
     st.bytes_read += src.raw_bytes(chunks[i]);
-    fn(chunks[i], b.block.data(), src.chunk_count(chunks[i]));
+    fn(chunks[i], b.block[i % 2].data(), src.chunk_count(chunks[i]));
   }
   return {};
 }
@@ -89,13 +95,13 @@ Result<SvdResult> streaming_svd(const ChunkSource& src, const std::vector<size_t
   for (size_t c : chunks) max_raw = std::max(max_raw, src.raw_bytes(c)), max_count = std::max(max_count, src.chunk_count(c));
   Status local;
   try {
-    b.raw[0].resize(max_raw);
-    b.raw[1].resize(max_raw);
-    b.block.resize(max_count * m);
+    b.raw.resize(max_raw);
+    b.block[0].resize(max_count * m);
+    b.block[1].resize(max_count * m);
   } catch (const std::bad_alloc&) {
-    local = io_error("out of memory allocating the chunk buffers (" + std::to_string(2 * max_raw + 4 * max_count * m) + " bytes)");
+    local = io_error("out of memory allocating the chunk buffers (" + std::to_string(max_raw + 8 * max_count * m) + " bytes)");
   }
-  st.buffer_bytes = 2 * max_raw + 4 * max_count * m;
+  st.buffer_bytes = max_raw + 8 * max_count * m;
   const int total_passes = opt.power_iters + 2;
   if (opt.progress) opt.progress->start("fmf out-of-core SVD", uint64_t(total_passes) * chunks.size());
 
@@ -131,10 +137,8 @@ Result<SvdResult> streaming_svd(const ChunkSource& src, const std::vector<size_t
     MatrixXf Om, Yf;
     auto sketch = [&](size_t c, const float* Bp, size_t k) {
       Eigen::Map<const MatrixXf> B(Bp, Index(m), Index(k));
-      double e = 0;
-#pragma omp parallel for reduction(+ : e) schedule(static)
-      for (Index j = 0; j < Index(k); ++j) e += B.col(j).cast<double>().squaredNorm();
-      energy += e;
+      // Column sums in float (short), accumulated in double; serial: see for_each_chunk.
+      for (Index j = 0; j < Index(k); ++j) energy += double(B.col(j).squaredNorm());
       gaussian_rows(opt.seed, src.chunk_first(c), k, l, Om);
       Yf.noalias() = B * Om;
       Y += Yf.cast<double>();

@@ -21,8 +21,8 @@
 // every process stop, and Collective::agree hands all of them the failing process's message.
 // Sums run in double, so the result equals the single-process one up to float rounding.
 //
-// Memory: two raw chunk buffers (the next chunk is read by a helper thread while the current
-// one is multiplied) + one float chunk + O((m + n_local) l) for Y, Q and W^T. The caller sizes
+// Memory: one raw chunk buffer and two float chunks (a helper thread reads and decodes the next
+// chunk while the current one is multiplied) + O((m + n_local) l) for Y, Q and W^T. The caller sizes
 // chunks so this stays under its limit (ooc_fmf.h).
 #pragma once
 #include <cstdint>

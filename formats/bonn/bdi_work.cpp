@@ -137,7 +137,18 @@ Status BdiWriter::write_texels(uint64_t t0, uint64_t n, const float* abrdfs) {
   for (uint64_t t = t0; t < t0 + n;) {
     const uint64_t run = std::min(t0 + n, (t / m_per_chunk + 1) * m_per_chunk) - t;
     h.resize(run * m);
-    const float mx = floats_to_half(abrdfs + (t - t0) * m, run * m, 1.0f / m_scale, h.data());
+    // Converted in parallel slices (the conversion, not the disk, bounds this loop with a warm page cache).
+    const size_t total = run * m, slices = std::max<size_t>(1, std::min<size_t>(64, total >> 20));
+    float mx = 0;
+    bool nan = false;  // apart from the max: a max reduction may drop NaN
+#pragma omp parallel for reduction(max : mx) reduction(|| : nan) schedule(static)
+    for (size_t k = 0; k < slices; ++k) {
+      const size_t a = total * k / slices, b = total * (k + 1) / slices;
+      const float v = floats_to_half(abrdfs + (t - t0) * m + a, b - a, 1.0f / m_scale, h.data() + a);
+      if (std::isnan(v)) nan = true;
+      else mx = std::max(mx, v);
+    }
+    if (nan) mx = std::numeric_limits<float>::quiet_NaN();
     if (std::isnan(mx)) return corrupt_data(m_path + ": the input holds a NaN value");
     if (!(mx <= k_half_max)) {
       m_overflow = std::isfinite(mx) ? mx : std::numeric_limits<float>::infinity();

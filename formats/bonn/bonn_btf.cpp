@@ -82,7 +82,8 @@ bool is_bonn_btf(const std::string& path) {
   uint8_t head[10];
   const size_t n = std::fread(head, 1, sizeof head, f);
   std::fclose(f);
-  return !bonn::match_signature(head, n).empty();
+  // An unfinished btfc working file (bdi_work.h) counts too, so opening it names the problem.
+  return !bonn::match_signature(head, n).empty() || (n == 10 && std::memcmp(head, k_bdi_incomplete, 10) == 0);
 }
 
 Result<BonnInfo> read_bonn_info(const std::string& path) {
