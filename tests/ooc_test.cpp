@@ -334,3 +334,31 @@ TEST(StreamingFmf, NonFiniteValueInAChunkIsAnErrorNamingIt) {
   EXPECT_NE(st.status().message().find("BDI chunk 2 holds a non-finite value at texel (7, 5)"), std::string::npos) << st.status().message();
   std::remove(path.c_str());
 }
+
+TEST(BdiWork, ImageGroupsWriteTheSameFileAsTexelBands) {
+  const Btf b = synth(7, 5);
+  const BtfDesc& d = b.desc();
+  const std::string a = tmp_path("bands.btf"), c = tmp_path("images.btf");
+  ASSERT_TRUE(write_bdi(b, a, 2).ok());
+  {
+    auto w = BdiWriter::create(c, d, 2, 1.0f, "<btfc_work scale=\"1.000000\"/>");
+    ASSERT_TRUE(w.ok());
+    // Groups of 11 images (the last one short), image-major as read_images delivers them.
+    const size_t texels = d.num_texels(), nc = size_t(d.channels);
+    for (size_t i0 = 0; i0 < d.num_images(); i0 += 11) {
+      const size_t k = std::min<size_t>(11, d.num_images() - i0);
+      std::vector<float> img(k * texels * nc);
+      for (size_t j = 0; j < k; ++j)
+        for (size_t t = 0; t < texels; ++t)
+          for (size_t ch = 0; ch < nc; ++ch) img[(j * texels + t) * nc + ch] = b.abrdf(t)[(i0 + j) * nc + ch];
+      ASSERT_TRUE(w.value()->write_images(i0, k, img.data()).ok());
+    }
+    ASSERT_TRUE(w.value()->finish().ok());
+  }
+  std::ifstream fa(a, std::ios::binary), fc(c, std::ios::binary);
+  const std::string sa((std::istreambuf_iterator<char>(fa)), {}), sc((std::istreambuf_iterator<char>(fc)), {});
+  EXPECT_GT(sa.size(), d.num_values() * 2);
+  EXPECT_TRUE(sa == sc) << "the two writers' files differ";
+  std::remove(a.c_str());
+  std::remove(c.c_str());
+}

@@ -86,6 +86,18 @@ python3 -c "
 import json; a=json.load(open('$W/hin.json'))['rel_l2']; b=json.load(open('$W/out.txt'))['rel_l2']
 assert 1e-4 < a < 0.5 and abs(a - b) / a < 0.01, (a, b); print('ok   hdr-error in core %.6f, out of core %.6f' % (a, b))" || fails=$((fails + 1))
 
+# An image set (81 EXR images, one view) streams into the working file image by image.
+check synth-set 0 "$BTFC" synth --width 20 --height 16 --views 30,0 -o "$W/set"
+check set-in-core 0 "$BTFC" -q compress "$W/set" -c fmf:rank=8:svd=randomized -o "$W/set.in.btfc"
+check set-ooc 0 "$BTFC" --json compress "$W/set" -c fmf:rank=8 -o "$W/set.ooc.btfc" --work-file "$W/setw.btf"
+expect_grep set-built '"work_file_built": true' "$W/out.txt"
+check set-cmp-in 0 "$BTFC" --json compare --no-ssim "$W/set" "$W/set.in.btfc"
+cp "$W/out.txt" "$W/setin.json"
+check set-cmp-ooc 0 "$BTFC" --json compare --no-ssim "$W/set" "$W/set.ooc.btfc"
+python3 -c "
+import json; a=json.load(open('$W/setin.json'))['rel_l2']; b=json.load(open('$W/out.txt'))['rel_l2']
+assert 1e-4 < a < 0.5 and abs(a - b) / a < 0.01, (a, b); print('ok   image-set in core %.6f, out of core %.6f' % (a, b))" || fails=$((fails + 1))
+
 # decompress to a Bonn BDI streams texel bands; decompress to .btfc beyond the limit refuses.
 check decompress-bdi 0 "$BTFC" --json decompress "$W/ooc.btfc" -o "$W/d.btf" --max-memory 8M
 check cmp-bdi 0 "$BTFC" --json compare --no-ssim "$W/ooc.btfc" "$W/d.btf"
