@@ -51,7 +51,7 @@ class ChunkSource {
 };
 
 // Collective operations over the processes that share a factorization. The default is one
-// process: sums are the identity. core MPI lives in mpi/ (btfc-mpi), behind the same interface.
+// process: sums are the identity. The MPI one is mpi/mpi_collective.h (btfc-mpi).
 class Collective {
  public:
   virtual ~Collective() = default;
