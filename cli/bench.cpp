@@ -50,6 +50,7 @@ double ssim_of(const BenchResult& r) { return r.metrics.mean_ssim; }
 }  // namespace
 
 int cmd_bench(const Global& g, const BenchArgs& a) {
+  if (int code = 0; bench_streamed(g, a, code)) return code;  // larger than --max-memory: streamed fmf
   std::vector<std::string> specs;
   for (const std::string& s : a.specs) {
     auto expanded = expand_sweep(s);

@@ -248,6 +248,7 @@ int cmd_info(const Global& g, const std::string& path, bool verify) {
 }
 
 int cmd_compress(const Global& g, const CompressArgs& a) {
+  if (int code = 0; compress_streamed(g, a, code)) return code;
   auto resolved = resolve_spec(a.spec);
   if (!resolved.ok()) return fail(g, resolved.status());
   auto [codec, params] = std::move(resolved).value();
@@ -304,6 +305,7 @@ int cmd_compress(const Global& g, const CompressArgs& a) {
 }
 
 int cmd_decompress(const Global& g, const DecompressArgs& a) {
+  if (int code = 0; decompress_streamed(g, a, code)) return code;
   auto model = open_model(a.in);
   if (!model.ok()) return fail(g, model.status());
   DecodeRequest req;

@@ -36,6 +36,8 @@ struct CompressArgs {
   unsigned long long seed = 1;
   // Budget targeting (codecs/target.h): at most one; the codec's quality knob is searched.
   std::optional<double> target_psnr, target_ssim, max_bytes;
+  std::string max_memory;  // --max-memory SIZE ("" = default_max_memory())
+  std::string work_file;   // --work-file PATH: keep / reuse the out-of-core working file
 };
 
 struct DecompressArgs {
@@ -44,6 +46,7 @@ struct DecompressArgs {
   std::string lights, views;        // "0,3,5"
   std::string format = "exr";
   double lod = 0;                   // level of detail (lpyr); 0 = full detail
+  std::string max_memory;
 };
 
 struct EvalArgs {
@@ -92,6 +95,7 @@ struct RenderArgs {
   std::string env;                 // lat-long EXR: environment lighting
   double intensity = 1;
   int size = 256, tiles = 1;
+  std::string max_memory;
 };
 
 // Applies --device (auto | cpu | cl) to the process (core/cl_runtime.h).
@@ -109,5 +113,11 @@ int cmd_relight(const Global& g, const RelightArgs& a);
 int cmd_convert(const Global& g, const ConvertArgs& a);
 int cmd_bench(const Global& g, const BenchArgs& a);
 int cmd_render(const Global& g, const RenderArgs& a);
+
+// Bounded memory (cli/stream_commands.cpp): each returns true when it handled the command
+// (the BTF does not fit in --max-memory, or the output is a streamed Bonn BDI), with `code` set.
+bool compress_streamed(const Global& g, const CompressArgs& a, int& code);
+bool decompress_streamed(const Global& g, const DecompressArgs& a, int& code);
+bool bench_streamed(const Global& g, const BenchArgs& a, int& code);
 
 }  // namespace btfc::cli

@@ -59,6 +59,8 @@ int main(int argc, char** argv) {
   auto* tb = compress->add_option("--max-bytes", ca.max_bytes, "... the most accurate setting whose payload fits in this many bytes")->check(CLI::PositiveNumber);
   tp->excludes(ts)->excludes(tb);
   ts->excludes(tb);
+  compress->add_option("--max-memory", ca.max_memory, "BTF data held in memory at most (e.g. 2G; default 80% of available RAM); larger inputs stream (fmf)");
+  compress->add_option("--work-file", ca.work_file, "out-of-core working file (a Bonn BDI .btf), kept and reused; default: a temporary next to the output");
   compress->callback([&] { code = cmd_compress(g, ca); });
 
   DecompressArgs da;
@@ -69,6 +71,7 @@ int main(int argc, char** argv) {
   decompress->add_option("--lights", da.lights, "comma-separated light indices");
   decompress->add_option("--views", da.views, "comma-separated view indices");
   decompress->add_option("--format", da.format, "image-set format")->check(CLI::IsMember({"exr", "png"}));
+  decompress->add_option("--max-memory", da.max_memory, "decoded data held in memory at most; -o OUT.btf (Bonn BDI) streams");
   decompress->add_option("--lod", da.lod, "level of detail (lpyr): 0 = full detail")->check(CLI::Range(0.0, 64.0));
   decompress->callback([&] { code = cmd_decompress(g, da); });
 
@@ -129,6 +132,7 @@ int main(int argc, char** argv) {
   bench->add_flag("--pareto", ba.pareto, "list which run wins at each byte budget (PSNR and SSIM fronts)");
   bench->add_flag("--no-renders", ba.no_renders, "skip the rendered-image SSIM");
   bench->add_option("--throughput-queries", ba.throughput_queries, "random interpolated evaluations per timing round (0 = skip)");
+  bench->add_option("--max-memory", ba.max_memory, "BTF data held in memory at most; larger inputs stream (fmf; no SSIM)");
   bench->add_flag("--no-header", no_header, "omit the table header");
   bench->callback([&] {
     ba.header = !no_header;

@@ -134,11 +134,10 @@ Status list_images(const fs::path& dir, std::vector<std::pair<fs::path, ImageNam
 // Reads images [first, last) of `files` (all of view v, lights l..l+n) into rows of `btf`.
 // The images are decoded into a small per-thread buffer first, then scattered texel by texel:
 // a texel's rows for consecutive lights are contiguous, so the scatter writes whole cache lines.
-Status read_block(const std::vector<ImageFile>& files, size_t first, size_t last, Btf& btf, std::vector<float>& buf,
-                  std::vector<uint8_t>& bytes) {
-  const BtfDesc& d = btf.desc();
+// Decodes images [first, last) into dst, image-major: dst[((i - first) * texels + t) * 3 + c].
+Status decode_images(const std::vector<ImageFile>& files, size_t first, size_t last, const BtfDesc& d, float* out,
+                     std::vector<uint8_t>& bytes) {
   const size_t px = d.num_texels();
-  buf.resize((last - first) * px * 3);
   for (size_t i = first; i < last; ++i) {
     const std::string name = files[i].path.string();
     OIIO::ImageSpec config;
@@ -153,7 +152,7 @@ Status read_block(const std::vector<ImageFile>& files, size_t first, size_t last
                           files[0].path.filename().string() + ")");
     if (spec.nchannels < 3)
       return unsupported(name + ": image has " + std::to_string(spec.nchannels) + " channels, need at least 3 (RGB)");
-    float* dst = buf.data() + (i - first) * px * 3;
+    float* dst = out + (i - first) * px * 3;
     if (!is_linear_format(files[i].path) && spec.format == OIIO::TypeDesc::UINT8) {
       bytes.resize(px * 3);
       if (!in->read_image(0, 0, 0, 3, OIIO::TypeDesc::UINT8, bytes.data()))
@@ -173,6 +172,15 @@ Status read_block(const std::vector<ImageFile>& files, size_t first, size_t last
       }
     }
   }
+  return {};
+}
+
+Status read_block(const std::vector<ImageFile>& files, size_t first, size_t last, Btf& btf, std::vector<float>& buf,
+                  std::vector<uint8_t>& bytes) {
+  const BtfDesc& d = btf.desc();
+  const size_t px = d.num_texels();
+  buf.resize((last - first) * px * 3);
+  BTFC_RETURN_IF_ERROR(decode_images(files, first, last, d, buf.data(), bytes));
   const size_t n = last - first, v = size_t(files[first].v), l0 = size_t(files[first].l);
   for (size_t t = 0; t < px; ++t) {
     float* row = btf.abrdf(t) + d.row(l0, v, 0);
@@ -182,7 +190,7 @@ Status read_block(const std::vector<ImageFile>& files, size_t first, size_t last
   return {};
 }
 
-Result<Btf> read_impl(const std::string& path) {
+Status plan_impl(const std::string& path, BtfDesc& desc, std::vector<ImageFile>& files) {
   std::error_code ec;
   const fs::path dir(path);
   if (!fs::exists(dir, ec)) return io_error(path + ": no such file or directory");
@@ -199,7 +207,7 @@ Result<Btf> read_impl(const std::string& path) {
     view_names.insert(normalized(n.tv, n.pv));
   }
   std::map<Angles, int> li, vi;
-  BtfDesc desc;
+  desc = BtfDesc{};
   desc.channels = 3;
   for (const auto& [p, n] : named) desc.hdr = desc.hdr || is_linear_format(p);
   desc.lights = make_set(light_names, li);
@@ -208,7 +216,7 @@ Result<Btf> read_impl(const std::string& path) {
   // Exactly one image per (light, view) pair.
   const size_t nl = desc.num_lights(), nv = desc.num_views();
   std::vector<int> slot(nl * nv, -1);
-  std::vector<ImageFile> files(nl * nv);
+  files.assign(nl * nv, ImageFile{});
   for (size_t k = 0; k < named.size(); ++k) {
     const ImageName& n = named[k].second;
     const int l = li[normalized(n.tl, n.pl)], v = vi[normalized(n.tv, n.pv)];
@@ -238,7 +246,15 @@ Result<Btf> read_impl(const std::string& path) {
     desc.width = in->spec().width;
     desc.height = in->spec().height;
   }
+  return desc.validate().with_context(path);
+}
+
+Result<Btf> read_impl(const std::string& path) {
+  BtfDesc desc;
+  std::vector<ImageFile> files;
+  BTFC_RETURN_IF_ERROR(plan_impl(path, desc, files));
   BTFC_ASSIGN_OR_RETURN(Btf btf, Btf::create(desc));
+  const size_t nl = desc.num_lights(), nv = desc.num_views();
 
   // Work items: blocks of consecutive lights of one view, each decoded into <= ~32 MB.
   const size_t img_bytes = desc.num_texels() * 3 * sizeof(float);
@@ -307,6 +323,43 @@ bool is_image_set(const std::string& path) {
   } catch (...) {  // is_image_set is a yes/no probe
   }
   return false;
+}
+
+Result<ImageSetPlan> plan_image_set(const std::string& path) {
+  try {
+    ImageSetPlan p;
+    p.path = path;
+    std::vector<ImageFile> files;
+    BTFC_RETURN_IF_ERROR(plan_impl(path, p.desc, files));
+    for (const ImageFile& f : files) p.files.push_back(f.path.string());
+    return p;
+  } catch (const std::exception& e) {
+    return io_error(path + ": " + e.what());
+  }
+}
+
+Status read_images(const ImageSetPlan& plan, size_t first, size_t last, float* dst) {
+  if (first > last || last > plan.files.size()) return invalid_argument(plan.path + ": image range outside the set");
+  const size_t px = plan.desc.num_texels();
+  const long n = long(last - first);
+  std::vector<Status> errors(static_cast<size_t>(n));
+  std::vector<ImageFile> files(plan.files.size());
+  for (size_t i = 0; i < files.size(); ++i) files[i] = {plan.files[i], int(i % plan.desc.num_lights()), int(i / plan.desc.num_lights())};
+#pragma omp parallel
+  {
+    std::vector<uint8_t> bytes;
+#pragma omp for schedule(dynamic, 1)
+    for (long i = 0; i < n; ++i) {
+      try {
+        errors[size_t(i)] = decode_images(files, first + size_t(i), first + size_t(i) + 1, plan.desc, dst + size_t(i) * px * 3, bytes);
+      } catch (const std::exception& e) {
+        errors[size_t(i)] = io_error(plan.files[first + size_t(i)] + ": " + e.what());
+      }
+    }
+  }
+  for (const Status& s : errors)
+    if (!s.ok()) return s;
+  return {};
 }
 
 Result<Btf> read_image_set(const std::string& path) {

@@ -38,6 +38,18 @@ bool is_image_set(const std::string& path);
 
 Result<Btf> read_image_set(const std::string& path);
 
+// Streaming (out-of-core) reading: the set's shape and its image files in BTF row order
+// (image i = light + nL * view), checked as read_image_set checks them, without the pixels.
+struct ImageSetPlan {
+  std::string path;
+  BtfDesc desc;
+  std::vector<std::string> files;
+};
+Result<ImageSetPlan> plan_image_set(const std::string& path);
+// Images [first, last) of the plan, image-major: dst[((i - first) * texels + t) * 3 + c]
+// (decoded in parallel; same conversions and errors as read_image_set).
+Status read_images(const ImageSetPlan& plan, size_t first, size_t last, float* dst);
+
 enum class ImageFormat { exr, png };
 Status write_image_set(const Btf& btf, const std::string& dir, ImageFormat format);
 

@@ -10,6 +10,7 @@ PACKAGES=(
   libceres-dev libopenblas-dev zlib1g-dev libbz2-dev libcli11-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   python3-numpy python3-skimage
+  libopenmpi-dev openmpi-bin
 )
 missing=()
 for p in "${PACKAGES[@]}"; do

@@ -347,6 +347,21 @@ void quantize(Block& b, bool half) {
   }
 }
 
+// A factorized block from an SVD result, quantised; its statistics go to `stats`.
+Block block_from_svd(const std::string& name, fmf::SvdResult r, bool half, int max_rank, double target, ModelStats& stats) {
+  Block b{name, std::move(r.U), std::move(r.SxV), r.S.cast<float>(), {}};
+  quantize(b, half);
+  const int kept = int(b.U.cols());
+  stats.add("rank." + name, kept);
+  stats.add("rel_error." + name, r.rel_error_estimate());
+  stats.note("svd." + name, r.method);
+  if (kept < max_rank && target == 0)
+    stats.note("clamped." + name, "rank " + std::to_string(max_rank) + " clamped to " + std::to_string(kept) +
+                                      " (the data's numerical rank limit is " + std::to_string(r.data_rank_limit) + ")");
+  if (!r.target_reached) stats.note("target." + name, "target_error not reached at the maximum rank " + std::to_string(max_rank));
+  return b;
+}
+
 class FmfCodec final : public Codec {
  public:
   const char* name() const override { return "fmf"; }
@@ -375,18 +390,7 @@ class FmfCodec final : public Codec {
     auto factor = [&](const std::string& name, const float* B, size_t rows, int max_rank) -> Status {
       opt.max_rank = max_rank;
       BTFC_ASSIGN_OR_RETURN(fmf::SvdResult r, fmf::truncated_svd(B, rows, d.num_texels(), opt));
-      Block b{name, std::move(r.U), std::move(r.SxV), r.S.cast<float>(), {}};
-      quantize(b, cfg.half);
-      const int kept = int(b.U.cols());
-      stats.add("rank." + name, kept);
-      stats.add("rel_error." + name, r.rel_error_estimate());
-      stats.note("svd." + name, r.method);
-      if (kept < max_rank && opt.target_rel_error == 0)
-        stats.note("clamped." + name, "rank " + std::to_string(max_rank) + " clamped to " + std::to_string(kept) +
-                                          " (the data's numerical rank limit is " + std::to_string(r.data_rank_limit) + ")");
-      if (!r.target_reached)
-        stats.note("target." + name, "target_error not reached at the maximum rank " + std::to_string(max_rank));
-      blocks.push_back(std::move(b));
+      blocks.push_back(block_from_svd(name, std::move(r), cfg.half, max_rank, opt.target_rel_error, stats));
       return {};
     };
     if (!cfg.dfmf) {
@@ -572,6 +576,18 @@ Result<std::unique_ptr<Model>> make_fmf_model(const BtfDesc& desc, int cm, std::
   auto model = std::make_unique<FmfModel>(desc, p.canonical(), cfg, std::move(blocks));
   for (const Block& b : model->blocks()) model->mutable_stats().add("rank." + b.name, double(b.U.cols()));
   model->mutable_stats().add("bonn_color_model", cm);
+  return std::unique_ptr<Model>(std::move(model));
+}
+
+Result<std::unique_ptr<Model>> make_fmf_model_from_svd(const BtfDesc& desc, const Params& p, fmf::SvdResult r, ModelStats stats) {
+  const Config cfg = config_from(p);
+  if (cfg.dfmf) return unsupported("fmf: make_fmf_model_from_svd builds color=rgb models only");
+  if (size_t(r.U.rows()) != desc.abrdf_size() || size_t(r.SxV.rows()) != desc.num_texels() || r.U.cols() != r.SxV.cols())
+    return invalid_argument("fmf: factor shapes disagree with the BTF (" + desc.summary() + ")");
+  std::vector<Block> blocks;
+  blocks.push_back(block_from_svd("rgb", std::move(r), cfg.half, int(p.get_int("rank")), p.get_real("target_error"), stats));
+  auto model = std::make_unique<FmfModel>(desc, p.canonical(), cfg, std::move(blocks));
+  model->mutable_stats() = std::move(stats);
   return std::unique_ptr<Model>(std::move(model));
 }
 

@@ -78,4 +78,10 @@ struct FmfFactorsView {
 // invalid_argument when `model` is not an fmf model.
 Result<FmfFactorsView> fmf_factors(const Model& model);
 
+// An fmf model (color=rgb) from a finished factorization of the BTF matrix, as encode() makes it
+// (quantisation to the spec's precision, rank / error statistics); for the out-of-core path
+// (codecs/fmf/ooc_fmf.h), whose SVD streams. `r.SxV` must hold all texels.
+namespace fmf { struct SvdResult; }
+Result<std::unique_ptr<Model>> make_fmf_model_from_svd(const BtfDesc& desc, const Params& params, fmf::SvdResult r, ModelStats stats);
+
 }  // namespace btfc

@@ -33,25 +33,6 @@ double frobenius2(ConstMapF& B) {
   return total;
 }
 
-// Picks how many of the (descending) eigenvalues to keep.
-int choose_rank(const Eigen::VectorXd& lambda, double total, const SvdOptions& opt, int& data_rank, bool& reached) {
-  const Index k = lambda.size();
-  const double floor = lambda.size() ? lambda(0) * k_rel_sigma_floor * k_rel_sigma_floor : 0;
-  data_rank = 0;
-  while (data_rank < k && lambda(data_rank) > floor && lambda(data_rank) > 0) ++data_rank;
-  int rank = std::min<int>(opt.max_rank, data_rank);
-  reached = true;
-  if (opt.target_rel_error > 0 && total > 0) {
-    const double allowed = opt.target_rel_error * opt.target_rel_error * total;
-    double kept = 0;
-    int r = 0;
-    while (r < rank && total - kept > allowed) kept += lambda(r++);
-    reached = total - kept <= allowed * (1 + 1e-9);
-    rank = r;
-  }
-  return std::max(rank, 1);
-}
-
 Result<SvdResult> exact_svd(ConstMapF& B, const SvdOptions& opt) {
   const Index m = B.rows(), n = B.cols();
   const bool rows_small = m <= n;
@@ -166,6 +147,24 @@ Result<SvdResult> randomized_svd(ConstMapF& B, const SvdOptions& opt) {
 }
 
 }  // namespace
+
+int choose_rank(const Eigen::VectorXd& lambda, double total, const SvdOptions& opt, int& data_rank, bool& reached) {
+  const Index k = lambda.size();
+  const double floor = lambda.size() ? lambda(0) * k_rel_sigma_floor * k_rel_sigma_floor : 0;
+  data_rank = 0;
+  while (data_rank < k && lambda(data_rank) > floor && lambda(data_rank) > 0) ++data_rank;
+  int rank = std::min<int>(opt.max_rank, data_rank);
+  reached = true;
+  if (opt.target_rel_error > 0 && total > 0) {
+    const double allowed = opt.target_rel_error * opt.target_rel_error * total;
+    double kept = 0;
+    int r = 0;
+    while (r < rank && total - kept > allowed) kept += lambda(r++);
+    reached = total - kept <= allowed * (1 + 1e-9);
+    rank = r;
+  }
+  return std::max(rank, 1);
+}
 
 void top_eigenpairs(const MatrixXd& G, Index l, Eigen::VectorXd& lambda, MatrixXd& vecs) {
   Eigen::SelfAdjointEigenSolver<MatrixXd> es(G);

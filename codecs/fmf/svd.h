@@ -57,6 +57,12 @@ struct SvdResult {
 // double; l <= G.rows(). Shared by the exact SVD path and lpca's per-cluster PCA.
 void top_eigenpairs(const Eigen::MatrixXd& G, Eigen::Index l, Eigen::VectorXd& lambda, Eigen::MatrixXd& vecs);
 
+// How many of the descending eigenvalues `lambda` (sigma^2) of a matrix with energy `total`
+// (||B||_F^2) to keep: at most opt.max_rank and the numerical rank (sigma > 1e-6 sigma_max),
+// with target_rel_error the smallest such rank reaching it; at least 1. Sets data_rank and
+// reached. Shared by truncated_svd and the out-of-core path (ooc_svd.h).
+int choose_rank(const Eigen::VectorXd& lambda, double total, const SvdOptions& opt, int& data_rank, bool& reached);
+
 // B is column-major with leading dimension m. Fails on m == 0 or n == 0.
 Result<SvdResult> truncated_svd(const float* B, size_t m, size_t n, const SvdOptions& opt);
 

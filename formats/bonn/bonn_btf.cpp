@@ -3,8 +3,10 @@
 #include "formats/bonn/bonn_btf.h"
 
 #include <cstdio>
+#include <cstring>
 
 #include "codecs/fmf/fmf.h"
+#include "formats/bonn/bdi_work.h"
 #include "formats/bonn/bonn_io.h"
 
 namespace btfc {
@@ -23,6 +25,9 @@ Result<std::unique_ptr<Model>> parse(const std::string& path, BonnInfo& info, bo
   BTFC_RETURN_IF_ERROR(src.read_at(0, head, n, "signature"));
   info.signature = bonn::match_signature(head, n);
   if (info.signature.empty()) {
+    if (n == 10 && std::memcmp(head, k_bdi_incomplete, 10) == 0)
+      return corrupt_data(path + ": incomplete working file from an interrupted btfc run (its completion signature was never "
+                                 "written); not trusted");
     std::string shown;
     for (size_t i = 0; i < n; ++i) shown += (head[i] >= 32 && head[i] < 127) ? char(head[i]) : '.';
     return corrupt_data(path + ": not a Bonn .btf file (signature '" + shown +
@@ -77,7 +82,8 @@ bool is_bonn_btf(const std::string& path) {
   uint8_t head[10];
   const size_t n = std::fread(head, 1, sizeof head, f);
   std::fclose(f);
-  return !bonn::match_signature(head, n).empty();
+  // An unfinished btfc working file (bdi_work.h) counts too, so opening it names the problem.
+  return !bonn::match_signature(head, n).empty() || (n == 10 && std::memcmp(head, k_bdi_incomplete, 10) == 0);
 }
 
 Result<BonnInfo> read_bonn_info(const std::string& path) {

@@ -72,7 +72,8 @@ struct BonnInfo {
   std::vector<std::pair<std::string, std::string>> notes() const;
 };
 
-// True when the file starts with a known Bonn signature (reads at most 10 bytes; no errors).
+// True when the file starts with a known Bonn signature, or with the placeholder of an unfinished
+// btfc working file (bdi_work.h; opening it then fails naming that). Reads 10 bytes; no errors.
 bool is_bonn_btf(const std::string& path);
 
 // Parses and validates the whole structure (every header, every size against the file, the

@@ -1,0 +1,210 @@
+// Bounded-memory (out-of-core) variants of compress / decompress / bench. The algorithms live
+// in codecs/fmf/ooc_*.h and formats/btf_stream.h; this file decides when to use them and prints.
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <iostream>
+#include <nlohmann/json.hpp>
+
+#include "cli/commands.h"
+#include "codecs/codec.h"
+#include "codecs/fmf/ooc_fmf.h"
+#include "core/memory.h"
+#include "formats/bonn/bdi_work.h"
+#include "formats/btf_io.h"
+#include "formats/btf_stream.h"
+
+namespace btfc::cli {
+namespace {
+
+using nlohmann::json;
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+json num(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+bool ends_with(const std::string& s, const std::string& x) { return s.size() >= x.size() && s.compare(s.size() - x.size(), x.size(), x) == 0; }
+
+Result<size_t> limit_of(const std::string& text) { return text.empty() ? Result<size_t>(default_max_memory()) : parse_size(text); }
+
+// Removes a temporary working file on every exit path.
+struct TempFile {
+  std::string path;
+  ~TempFile() {
+    if (!path.empty()) std::filesystem::remove(path);
+  }
+};
+
+// The streamed fmf encode of `in` within `limit`; fills `report` with what it did.
+Result<std::unique_ptr<Model>> encode_streamed(const Global& g, const std::string& in, const BtfDesc& desc, const std::string& spec,
+                                               const std::string& work_file, const std::string& temp_dir, size_t limit,
+                                               unsigned long long seed, json& report, TempFile& temp) {
+  BTFC_ASSIGN_OR_RETURN(auto resolved, resolve_spec(spec));
+  auto [codec, params] = std::move(resolved);
+  const std::string need = format_bytes(desc.num_values() * 4);
+  if (std::string(codec->name()) != "fmf")
+    return invalid_argument(in + ": the BTF (" + need + " as float32) does not fit in --max-memory " + format_bytes(limit) +
+                            "; only fmf compresses out of core (" + codec->name() + " needs it in memory)");
+  BTFC_ASSIGN_OR_RETURN(int l, streaming_sketch_width(params));
+  const uint32_t lines = stream_lines_per_chunk(desc, uint64_t(l), limit);
+  if (lines == 0)
+    return invalid_argument("--max-memory " + format_bytes(limit) + " is too small for " + desc.summary() + ": streaming needs at least " +
+                            format_bytes(streaming_fixed_bytes(desc.abrdf_size(), desc.num_texels(), uint64_t(l)) +
+                                         k_stream_bytes_per_value * desc.abrdf_size() * uint64_t(desc.width)));
+  std::string work = work_file;
+  if (work.empty()) {
+    work = temp_dir + "/.btfc-work-" + std::to_string(::getpid()) + ".btf";
+    temp.path = work;
+  }
+  Progress progress(g.quiet || g.json);
+  BTFC_ASSIGN_OR_RETURN(WorkFile wf, prepare_work_file(in, work, lines, limit, &progress));
+  if (!wf.note.empty() && !g.quiet && !g.json) std::cerr << "note: " << wf.note << "\n";
+  BTFC_ASSIGN_OR_RETURN(BdiChunks file, BdiChunks::open(wf.path));
+  const uint64_t chunk_buffers = k_stream_bytes_per_value * desc.abrdf_size() * file.chunk_count(0);
+  if (chunk_buffers + streaming_fixed_bytes(desc.abrdf_size(), desc.num_texels(), uint64_t(l)) > limit)
+    return invalid_argument(wf.path + ": its chunks of " + std::to_string(file.chunk_count(0)) + " texels need " + format_bytes(chunk_buffers) +
+                            " of buffers, more than --max-memory " + format_bytes(limit));
+  Context ctx;
+  ctx.seed = seed;
+  ctx.progress = &progress;
+  ctx.max_bytes = limit;
+  fmf::Collective single;
+  const auto t0 = Clock::now();
+  BTFC_ASSIGN_OR_RETURN(StreamedEncode enc, encode_fmf_streamed(file, desc, params, ctx, single));
+  report = json{{"max_memory", limit},
+                {"work_file", wf.path},
+                {"work_file_built", wf.built},
+                {"work_file_reused", wf.reused},
+                {"work_file_seconds", wf.seconds},
+                {"work_file_bytes", wf.bytes_written},
+                {"work_file_scale", wf.scale},
+                {"work_file_note", wf.note},
+                {"chunks", file.num_chunks()},
+                {"chunk_texels", file.chunk_count(0)},
+                {"passes", enc.stats.passes},
+                {"bytes_read", enc.stats.bytes_read},
+                {"pass_seconds", enc.stats.pass_seconds},
+                {"factorize_seconds", since(t0)},
+                {"buffer_bytes", enc.stats.buffer_bytes}};
+  return std::move(enc.model);
+}
+
+void print_report(const json& r) {
+  std::cout << "  out of core: working file " << r["work_file"].get<std::string>()
+            << (r["work_file_built"].get<bool>() ? " (built in " + std::to_string(r["work_file_seconds"].get<double>()) + " s)" : r["work_file_reused"].get<bool>() ? " (reused)" : " (the input)")
+            << ", " << r["chunks"] << " chunks of " << r["chunk_texels"] << " texels\n"
+            << "  " << r["passes"] << " passes, " << format_bytes(r["bytes_read"].get<uint64_t>()) << " read, factorization "
+            << r["factorize_seconds"].get<double>() << " s, peak RSS " << format_bytes(r["peak_rss_bytes"].get<uint64_t>())
+            << " (limit " << format_bytes(r["max_memory"].get<uint64_t>()) << ")\n";
+}
+
+}  // namespace
+
+bool compress_streamed(const Global& g, const CompressArgs& a, int& code) {
+  auto limit = limit_of(a.max_memory);
+  if (!limit.ok()) return code = fail(g, limit.status()), true;
+  auto desc = probe_btf(a.in);
+  if (!desc.ok()) return false;  // the in-core path reports the problem
+  if (desc->num_values() * 4 <= *limit && a.work_file.empty()) return false;
+  const auto t0 = Clock::now();
+  json report;
+  TempFile temp;
+  std::error_code ec;
+  const std::filesystem::path parent = std::filesystem::absolute(a.out, ec).parent_path();
+  auto model = encode_streamed(g, a.in, desc.value(), a.spec, a.work_file, parent.string(), *limit, a.seed, report, temp);
+  if (!model.ok()) return code = fail(g, model.status().with_context(a.in)), true;
+  const double enc_s = since(t0);
+  auto spec = resolve_spec(a.spec);
+  Status s = ends_with(a.out, ".btf") ? write_bonn(*model.value(), a.out, spec->second.get("precision") == "half")
+                                      : save_model(*model.value(), *spec->first, a.out);
+  if (!s.ok()) return code = fail(g, s), true;
+  report["peak_rss_bytes"] = peak_rss_bytes();
+  const double ratio = double(desc->num_values()) * 4.0 / double(std::filesystem::file_size(a.out));
+  if (g.json) {
+    json j{{"input", a.in}, {"output", a.out}, {"spec", model.value()->spec()}, {"encode_seconds", enc_s},
+           {"file_bytes", std::filesystem::file_size(a.out)}, {"ratio_vs_float32", ratio}, {"out_of_core", report}};
+    json st;
+    for (const auto& [k, v] : model.value()->stats().numbers) st[k] = num(v);
+    for (const auto& [k, v] : model.value()->stats().notes) st[k] = v;
+    j["stats"] = st;
+    std::cout << j.dump(2) << "\n";
+  } else if (!g.quiet) {
+    std::cout << "compressed " << a.in << " (" << desc->summary() << ") out of core with " << model.value()->spec() << "\n"
+              << "  -> " << a.out << ", ratio " << ratio << " : 1 vs float32, encode " << enc_s << " s\n";
+    print_report(report);
+  }
+  code = 0;
+  return true;
+}
+
+bool decompress_streamed(const Global& g, const DecompressArgs& a, int& code) {
+  auto limit = limit_of(a.max_memory);
+  if (!limit.ok()) return code = fail(g, limit.status()), true;
+  const bool subset = !a.region.empty() || !a.lights.empty() || !a.views.empty() || a.lod != 0;
+  if (!ends_with(a.out, ".btf")) {
+    if (subset) return false;
+    auto model = open_model(a.in);
+    if (!model.ok()) return false;
+    const uint64_t need = model.value()->desc().num_values() * 4;
+    if (need <= *limit) return false;
+    code = fail(g, invalid_argument(a.in + ": the decoded BTF (" + format_bytes(need) + ") does not fit in --max-memory " + format_bytes(*limit) +
+                                    "; decompress to a Bonn BDI (-o OUT.btf), which is written texel band by band"));
+    return true;
+  }
+  if (subset) return code = fail(g, invalid_argument("decompress -o OUT.btf (Bonn BDI) writes the whole BTF; --region/--lights/--views/--lod need .btfc or an image set")), true;
+  auto model = open_model(a.in);
+  if (!model.ok()) return code = fail(g, model.status()), true;
+  const auto t0 = Clock::now();
+  Status s = decode_to_bdi(*model.value(), a.out, *limit);
+  if (!s.ok()) return code = fail(g, s.with_context(a.in)), true;
+  const double dec_s = since(t0);
+  if (g.json)
+    std::cout << json{{"output", a.out}, {"desc", model.value()->desc().summary()}, {"decode_seconds", dec_s}, {"format", "Bonn BDI"},
+                      {"max_memory", *limit}, {"peak_rss_bytes", peak_rss_bytes()}}.dump(2) << "\n";
+  else if (!g.quiet)
+    std::cout << "decoded " << a.in << " -> " << a.out << " (Bonn BDI): " << model.value()->desc().summary() << " in " << dec_s << " s, peak RSS "
+              << format_bytes(peak_rss_bytes()) << "\n";
+  code = 0;
+  return true;
+}
+
+bool bench_streamed(const Global& g, const BenchArgs& a, int& code) {
+  auto limit = limit_of(a.max_memory);
+  if (!limit.ok()) return code = fail(g, limit.status()), true;
+  auto desc = probe_btf(a.in);
+  if (!desc.ok() || desc->num_values() * 4 <= *limit) return false;
+  const std::string label = a.label.empty() ? a.in : a.label;
+  json rows = json::array();
+  if (!g.json && a.header)
+    std::printf("%-18s %-30s %9s %10s %9s %8s %9s %9s\n", "data", "codec (as given)", "ratio", "RMSE", "PSNR", "SSIM", "enc s", "dec s");
+  std::error_code ec;
+  const std::string temp_dir = std::filesystem::temp_directory_path(ec).string();
+  for (const std::string& spec : a.specs) {
+    json report;
+    TempFile temp;
+    const auto t0 = Clock::now();
+    auto model = encode_streamed(g, a.in, desc.value(), spec, "", temp_dir, *limit, a.seed, report, temp);
+    if (!model.ok()) return code = fail(g, model.status().with_context(a.in)), true;
+    const double enc_s = since(t0);
+    auto file = BdiChunks::open(report["work_file"].get<std::string>());
+    if (!file.ok()) return code = fail(g, file.status()), true;
+    const auto t1 = Clock::now();
+    auto m = compare_streamed(file.value(), *model.value());  // decodes chunk by chunk while comparing
+    if (!m.ok()) return code = fail(g, m.status()), true;
+    const double dec_s = since(t1);
+    const double ratio = double(desc->num_values()) * 4.0 / double(model.value()->payload_bytes());
+    report["peak_rss_bytes"] = peak_rss_bytes();
+    rows.push_back({{"data", label}, {"spec", model.value()->spec()}, {"spec_given", spec}, {"ratio", ratio},
+                    {"payload_bytes", model.value()->payload_bytes()}, {"rmse", m->rmse}, {"rel_l2", num(m->rel_l2)},
+                    {"psnr", num(m->psnr)}, {"mean_ssim", nullptr}, {"encode_seconds", enc_s}, {"decode_compare_seconds", dec_s},
+                    {"out_of_core", report}});
+    if (!g.json)
+      std::printf("%-18s %-30s %9.2f %10.4g %9.3f %8s %9.3f %9.3f\n", label.c_str(), spec.c_str(), ratio, m->rmse, m->psnr, "n/a", enc_s, dec_s);
+  }
+  if (g.json) std::cout << rows.dump(2) << "\n";
+  else std::printf("out of core (--max-memory %s): SSIM not computed (needs whole images); dec s includes the comparison\n", format_bytes(*limit).c_str());
+  code = 0;
+  return true;
+}
+
+}  // namespace btfc::cli

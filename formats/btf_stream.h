@@ -1,0 +1,53 @@
+// Bounded-memory reading and writing of BTFs that do not fit in memory (`--max-memory`).
+//
+// prepare_work_file turns any input btfc reads into the working file the streamed fmf SVD
+// reads chunk by chunk (an uncompressed Bonn BDI, formats/bonn/bdi_work.h), in one streaming
+// pass that never holds more than the limit:
+//   uncompressed BDI whose chunks fit   -> used as it is (no copy)
+//   raw .btfc                           -> texel bands, CRC of the whole tensor verified
+//   image set (formats/image_set.h)     -> groups of images (rows of B) scattered per texel
+//   model .btfc / other Bonn files      -> decoded texel band by texel band
+// The working file records its source (path, size, modification time) in its meta xml: an
+// existing complete working file of the same source and chunking is reused, an incomplete one
+// (interrupted run, see bdi_work.h) or one of another source is rebuilt, and says so in `note`.
+// Values beyond the half range restart the pass with a power-of-two scale (bdi_work.h).
+#pragma once
+#include <string>
+
+#include "codecs/codec.h"
+#include "core/btf.h"
+#include "core/progress.h"
+
+namespace btfc {
+
+// The shape of the BTF at `path` without reading its values (any input read_btf takes).
+Result<BtfDesc> probe_btf(const std::string& path);
+
+struct WorkFile {
+  std::string path;        // the BDI file to read
+  bool built = false;      // written by this call (false: the input itself, or reused)
+  bool reused = false;     // an existing working file of the same source was reused
+  double seconds = 0;      // time of the building pass
+  uint64_t bytes_written = 0;
+  float scale = 1;
+  std::string note;        // why a file at work_path was not reused, scale restarts, ...
+};
+
+// lines_per_chunk: texel rows per chunk of a newly built file (ooc_fmf.h sizes it);
+// max_bytes bounds the buffers of the building pass.
+Result<WorkFile> prepare_work_file(const std::string& input, const std::string& work_path, uint32_t lines_per_chunk,
+                                   size_t max_bytes, Progress* progress);
+
+// Decodes `model` band by band into an uncompressed BDI at `path` (written under a temporary
+// name, renamed when complete), holding at most about max_bytes of decoded values.
+Status decode_to_bdi(const Model& model, const std::string& path, size_t max_bytes);
+
+}  // namespace btfc
+
+#include "core/metrics.h"
+namespace btfc {
+class BdiChunks;
+// RMSE, relative L2, PSNR (peak rule of core/metrics.h) and max |error| of `model` against the
+// BTF in `ref`, chunk by chunk; mean_ssim is NaN (SSIM needs whole images).
+Result<Metrics> compare_streamed(const BdiChunks& ref, const Model& model);
+}  // namespace btfc

@@ -1,0 +1,364 @@
+// Tests of the out-of-core path: BDI working files (writer, chunk reader, completion marker),
+// the streaming randomized SVD against the in-core one, processes simulated by threads, and
+// failures that must reach every process.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <Eigen/Dense>
+#include <Imath/half.h>
+#include <barrier>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <mutex>
+#include <random>
+#include <thread>
+
+#include "codecs/codec.h"
+#include "codecs/fmf/ooc_fmf.h"
+#include "codecs/fmf/svd.h"
+#include "core/synth.h"
+#include "formats/bonn/bdi_work.h"
+#include "formats/bonn/bonn_btf.h"
+
+using namespace btfc;
+
+namespace {
+
+std::string tmp_path(const std::string& name) { return ::testing::TempDir() + "/ooc_" + std::to_string(::getpid()) + "_" + name; }
+
+// A synthetic BTF: 81 lights, 2 views, RGB -> 486 rows.
+Btf synth(int w, int h, float scale = 1.0f) {
+  SynthOptions o;
+  o.width = w, o.height = h, o.scale = scale;
+  o.views = DirectionSet::single(dir_from_theta_phi(0.5, 1.0));
+  o.views.dirs.push_back(dir_from_theta_phi(0.9, 2.0));
+  return synthesize_btf(o).value();
+}
+
+Status write_bdi(const Btf& b, const std::string& path, uint32_t lines, float scale = 1.0f) {
+  BTFC_ASSIGN_OR_RETURN(auto w, BdiWriter::create(path, b.desc(), lines, scale, "<btfc_work scale=\"" + std::to_string(scale) + "\"/>"));
+  BTFC_RETURN_IF_ERROR(w->write_texels(0, b.desc().num_texels(), b.data()));
+  return w->finish();
+}
+
+// The whole matrix as chunks of `per` texels, straight from memory (no half rounding).
+class MemorySource final : public fmf::ChunkSource {
+ public:
+  MemorySource(const Btf& b, size_t per) : m_b(b), m_per(per) {}
+  size_t rows() const override { return m_b.desc().abrdf_size(); }
+  size_t num_chunks() const override { return (m_b.desc().num_texels() + m_per - 1) / m_per; }
+  size_t chunk_first(size_t c) const override { return c * m_per; }
+  size_t chunk_count(size_t c) const override { return std::min(m_per, m_b.desc().num_texels() - c * m_per); }
+  size_t raw_bytes(size_t c) const override { return chunk_count(c) * rows() * 4; }
+  Status read(size_t c, void* raw) const override {
+    if (fail_chunk == c) return io_error("cannot read chunk " + std::to_string(c) + " (injected)");
+    std::memcpy(raw, m_b.abrdf(chunk_first(c)), raw_bytes(c));
+    return {};
+  }
+  Status decode(size_t c, const void* raw, float* dst) const override {
+    std::memcpy(dst, raw, raw_bytes(c));
+    return {};
+  }
+  size_t fail_chunk = size_t(-1);
+
+ private:
+  const Btf& m_b;
+  size_t m_per;
+};
+
+// P "processes" as threads: sums through shared buffers and a barrier, like MPI_Allreduce.
+class ThreadGroup {
+ public:
+  explicit ThreadGroup(int p) : m_p(p), m_bar(p) {}
+  class Member final : public fmf::Collective {
+   public:
+    Member(ThreadGroup& g, int r) : m_g(g), m_r(r) {}
+    int rank() const override { return m_r; }
+    int size() const override { return m_g.m_p; }
+    Status allreduce_sum(double* d, size_t n) override {
+      m_g.m_bar.arrive_and_wait();
+      if (m_r == 0) m_g.m_sum.assign(n, 0.0);
+      m_g.m_bar.arrive_and_wait();
+      {
+        std::lock_guard<std::mutex> lock(m_g.m_mu);
+        for (size_t i = 0; i < n; ++i) m_g.m_sum[i] += d[i];
+      }
+      m_g.m_bar.arrive_and_wait();
+      std::copy(m_g.m_sum.begin(), m_g.m_sum.end(), d);
+      m_g.m_bar.arrive_and_wait();
+      return {};
+    }
+    Status reduce_sum_to_root(float* d, size_t n) override {
+      std::vector<double> x(d, d + n);
+      BTFC_RETURN_IF_ERROR(allreduce_sum(x.data(), n));
+      if (m_r == 0) std::copy(x.begin(), x.end(), d);
+      return {};
+    }
+    Status agree(const Status& local) override {
+      m_g.m_bar.arrive_and_wait();
+      if (!local.ok()) {
+        std::lock_guard<std::mutex> lock(m_g.m_mu);
+        if (m_r < m_g.m_first) m_g.m_first = m_r, m_g.m_err = local;
+      }
+      m_g.m_bar.arrive_and_wait();
+      Status s = m_g.m_first == INT32_MAX ? Status{} : Status(m_g.m_err.code(), "rank " + std::to_string(m_g.m_first) + ": " + m_g.m_err.message());
+      m_g.m_bar.arrive_and_wait();
+      return s;
+    }
+
+   private:
+    ThreadGroup& m_g;
+    int m_r;
+  };
+
+ private:
+  int m_p;
+  std::barrier<> m_bar;
+  std::mutex m_mu;
+  std::vector<double> m_sum;
+  int m_first = INT32_MAX;
+  Status m_err;
+};
+
+// ||B - U SxV^T||_F / ||B||_F.
+double actual_error(const Btf& b, const fmf::SvdResult& r) {
+  const size_t m = b.desc().abrdf_size(), n = b.desc().num_texels();
+  Eigen::Map<const Eigen::MatrixXf> B(b.data(), Eigen::Index(m), Eigen::Index(n));
+  Eigen::MatrixXd R = B.cast<double>() - r.U.cast<double>() * r.SxV.cast<double>().transpose();
+  return R.norm() / B.cast<double>().norm();
+}
+
+}  // namespace
+
+TEST(BdiWork, RoundTripThroughWriterChunksAndTheBonnReader) {
+  const Btf b = synth(9, 7);
+  const std::string path = tmp_path("rt.btf");
+  ASSERT_TRUE(write_bdi(b, path, 2).ok());
+  auto f = BdiChunks::open(path);
+  ASSERT_TRUE(f.ok()) << f.status().message();
+  EXPECT_EQ(f->num_chunks(), 4u);  // 7 rows / 2 per chunk
+  EXPECT_EQ(f->chunk_count(3), 9u);
+  const size_t m = b.desc().abrdf_size();
+  double max_rel = 0;
+  for (uint64_t c = 0; c < f->num_chunks(); ++c) {
+    std::vector<uint16_t> raw(f->chunk_bytes(c) / 2);
+    std::vector<float> v(raw.size());
+    ASSERT_TRUE(f->read_raw(c, raw.data()).ok());
+    ASSERT_TRUE(f->decode(c, raw.data(), v.data()).ok());
+    for (size_t i = 0; i < v.size(); ++i) {
+      const float want = b.data()[f->chunk_first(c) * m + i];
+      EXPECT_EQ(v[i], float(Imath::half(want))) << "chunk " << c << " value " << i;
+      if (want > 1e-3f) max_rel = std::max(max_rel, std::fabs(double(v[i]) - want) / want);
+    }
+  }
+  EXPECT_LT(max_rel, 1.0 / 1024);
+  // The existing Bonn BDI reader reads the same values: the working file is a valid .btf.
+  auto model = open_bonn_model(path);
+  ASSERT_TRUE(model.ok()) << model.status().message();
+  float rgb[3];
+  model.value()->eval(4, 5, 17, 1, rgb);
+  EXPECT_EQ(rgb[1], float(Imath::half(b.at(4, 5, 17, 1, 1))));
+  std::remove(path.c_str());
+}
+
+TEST(BdiWork, InterruptedFileIsDetectedAndNotTrusted) {
+  const Btf b = synth(8, 4);
+  const std::string path = tmp_path("part.btf");
+  {
+    auto w = BdiWriter::create(path, b.desc(), 1, 1.0f, "");
+    ASSERT_TRUE(w.ok());
+    ASSERT_TRUE(w.value()->write_texels(0, 16, b.data()).ok());
+    // Mid-run (as after a crash here): the file exists, but is not a BTF.
+    auto f = BdiChunks::open(path);
+    ASSERT_FALSE(f.ok());
+    EXPECT_EQ(f.status().code(), StatusCode::corrupt_data);
+    EXPECT_NE(f.status().message().find("incomplete working file"), std::string::npos) << f.status().message();
+    auto m = open_bonn_model(path);
+    ASSERT_FALSE(m.ok());
+    EXPECT_NE(m.status().message().find("incomplete"), std::string::npos) << m.status().message();
+  }
+  // A writer that never finished removes its file.
+  EXPECT_FALSE(std::ifstream(path).good());
+}
+
+TEST(BdiWork, ValuesBeyondHalfAskForAScaleAndScaledFilesReadBack) {
+  const Btf b = synth(6, 4, 1e6f);  // HDR: far beyond 65504
+  const std::string path = tmp_path("hdr.btf");
+  {
+    auto w = BdiWriter::create(path, b.desc(), 2, 1.0f, "");
+    ASSERT_TRUE(w.ok());
+    EXPECT_FALSE(w.value()->write_texels(0, b.desc().num_texels(), b.data()).ok());
+    EXPECT_GT(w.value()->overflow(), 65504.0f);
+  }
+  ASSERT_TRUE(write_bdi(b, path, 2, 64.0f).ok());
+  auto f = BdiChunks::open(path);
+  ASSERT_TRUE(f.ok());
+  EXPECT_EQ(f->scale(), 64.0f);
+  std::vector<uint16_t> raw(f->chunk_bytes(0) / 2);
+  std::vector<float> v(raw.size());
+  ASSERT_TRUE(f->read_raw(0, raw.data()).ok());
+  ASSERT_TRUE(f->decode(0, raw.data(), v.data()).ok());
+  for (size_t i = 0; i < v.size(); i += 97)
+    EXPECT_NEAR(v[i], b.data()[i], std::fabs(b.data()[i]) * 1e-3 + 64 * 6e-8) << i;
+  std::remove(path.c_str());
+}
+
+TEST(StreamingSvd, MatchesTheInCoreRandomizedSvd) {
+  const Btf b = synth(24, 20);  // 486 x 480
+  const size_t m = b.desc().abrdf_size(), n = b.desc().num_texels();
+  fmf::SvdOptions opt;
+  opt.max_rank = 12, opt.oversample = 8, opt.power_iters = 2, opt.method = fmf::SvdMethod::randomized;
+  auto in_core = fmf::truncated_svd(b.data(), m, n, opt);
+  ASSERT_TRUE(in_core.ok());
+  MemorySource src(b, 72);  // 7 chunks, the last one short
+  fmf::Collective one;
+  fmf::StreamStats st;
+  auto streamed = fmf::streaming_svd(src, fmf::owned_chunks(src, 0, 1), opt, one, &st);
+  ASSERT_TRUE(streamed.ok()) << streamed.status().message();
+  EXPECT_EQ(st.passes, opt.power_iters + 2);
+  EXPECT_EQ(st.bytes_read, uint64_t(opt.power_iters + 2) * m * n * 4);
+  ASSERT_EQ(streamed->U.cols(), 12);
+  ASSERT_EQ(size_t(streamed->SxV.rows()), n);
+  const double e_in = actual_error(b, in_core.value()), e_st = actual_error(b, streamed.value());
+  EXPECT_GT(e_st, 0.001);  // rank 12 of this data is not exact: the comparison means something
+  EXPECT_LT(std::fabs(e_st - e_in) / e_in, 0.01) << "in-core " << e_in << ", streamed " << e_st;
+  EXPECT_NEAR(streamed->rel_error_estimate(), e_st, 0.01 * e_st);
+  // Orthonormal U.
+  EXPECT_LT((streamed->U.transpose().cast<double>() * streamed->U.cast<double>() - Eigen::MatrixXd::Identity(12, 12)).norm(), 1e-4);
+}
+
+TEST(StreamingSvd, ThreeProcessesGiveTheOneProcessResult) {
+  const Btf b = synth(16, 15);
+  MemorySource src(b, 32);  // 8 chunks over 3 processes
+  fmf::SvdOptions opt;
+  opt.max_rank = 8, opt.oversample = 6, opt.power_iters = 2;
+  fmf::Collective one;
+  auto ref = fmf::streaming_svd(src, fmf::owned_chunks(src, 0, 1), opt, one);
+  ASSERT_TRUE(ref.ok());
+  ThreadGroup group(3);
+  std::vector<Result<fmf::SvdResult>> res(3, Result<fmf::SvdResult>(Status{}));
+  std::vector<std::thread> th;
+  for (int r = 0; r < 3; ++r)
+    th.emplace_back([&, r] {
+      ThreadGroup::Member me(group, r);
+      res[size_t(r)] = fmf::streaming_svd(src, fmf::owned_chunks(src, r, 3), opt, me);
+    });
+  for (auto& t : th) t.join();
+  for (int r = 0; r < 3; ++r) ASSERT_TRUE(res[size_t(r)].ok()) << res[size_t(r)].status().message();
+  const auto& got = res[0].value();
+  ASSERT_EQ(got.SxV.rows(), ref->SxV.rows());
+  EXPECT_TRUE(res[1]->SxV.size() == 0 && res[2]->SxV.size() == 0);
+  // The reconstruction U SxV^T (invariant to signs of components) agrees to float rounding.
+  Eigen::MatrixXd A = ref->U.cast<double>() * ref->SxV.cast<double>().transpose();
+  Eigen::MatrixXd B = got.U.cast<double>() * got.SxV.cast<double>().transpose();
+  EXPECT_LT((A - B).norm() / A.norm(), 1e-4);
+  EXPECT_GT(A.norm(), 0);
+}
+
+TEST(StreamingSvd, AFailingProcessStopsEveryProcessWithItsMessage) {
+  const Btf b = synth(16, 15);
+  MemorySource src(b, 32);
+  src.fail_chunk = 7;  // owned by process 2 of 3
+  fmf::SvdOptions opt;
+  opt.max_rank = 8, opt.oversample = 6, opt.power_iters = 1;
+  ThreadGroup group(3);
+  std::vector<Status> st(3);
+  std::vector<std::thread> th;
+  for (int r = 0; r < 3; ++r)
+    th.emplace_back([&, r] {
+      ThreadGroup::Member me(group, r);
+      st[size_t(r)] = fmf::streaming_svd(src, fmf::owned_chunks(src, r, 3), opt, me).status();
+    });
+  for (auto& t : th) t.join();  // a hang here would time the test out
+  for (int r = 0; r < 3; ++r) {
+    EXPECT_EQ(st[size_t(r)].code(), StatusCode::io_error) << r;
+    EXPECT_NE(st[size_t(r)].message().find("rank 2: cannot read chunk 7"), std::string::npos) << st[size_t(r)].message();
+  }
+}
+
+TEST(StreamingFmf, WorkingFileEncodeMatchesInCoreFmf) {
+  const Btf b = synth(20, 18);
+  const std::string path = tmp_path("enc.btf");
+  ASSERT_TRUE(write_bdi(b, path, 3).ok());
+  auto file = BdiChunks::open(path);
+  ASSERT_TRUE(file.ok());
+  auto spec = resolve_spec("fmf:rank=10:oversample=8:power_iters=3:svd=randomized");
+  ASSERT_TRUE(spec.ok());
+  Context ctx;
+  auto in_core = spec->first->encode(b, spec->second, ctx);
+  ASSERT_TRUE(in_core.ok());
+  fmf::Collective one;
+  auto st = encode_fmf_streamed(file.value(), b.desc(), spec->second, ctx, one);
+  ASSERT_TRUE(st.ok()) << st.status().message();
+  ASSERT_TRUE(st->model);
+  EXPECT_EQ(st->model->spec(), in_core.value()->spec());
+  auto err = [&](const Model& m) {
+    Btf out;
+    EXPECT_TRUE(m.decode_all(out).ok());
+    double se = 0, sr = 0;
+    for (size_t i = 0; i < b.size(); ++i) se += std::pow(double(out.data()[i]) - b.data()[i], 2), sr += std::pow(double(b.data()[i]), 2);
+    return std::sqrt(se / sr);
+  };
+  const double e_in = err(*in_core.value()), e_st = err(*st->model);
+  EXPECT_GT(e_in, 0.002);
+  EXPECT_LT(std::fabs(e_st - e_in) / e_in, 0.01) << "in-core " << e_in << ", streamed " << e_st;
+  // dfmf and svd=exact are refused, not silently changed.
+  auto dfmf = resolve_spec("fmf:color=dfmf");
+  EXPECT_EQ(encode_fmf_streamed(file.value(), b.desc(), dfmf->second, ctx, one).status().code(), StatusCode::unsupported);
+  std::remove(path.c_str());
+}
+
+TEST(StreamingFmf, NonFiniteValueInAChunkIsAnErrorNamingIt) {
+  Btf b = synth(8, 6);
+  const std::string path = tmp_path("nan.btf");
+  ASSERT_TRUE(write_bdi(b, path, 2).ok());
+  auto f0 = BdiChunks::open(path);
+  ASSERT_TRUE(f0.ok());
+  // A half NaN (0x7e00) in the last chunk, written over the file.
+  {
+    std::fstream io(path, std::ios::in | std::ios::out | std::ios::binary);
+    io.seekp(std::streamoff(f0->file_size() - 10));
+    const uint16_t nan = 0x7e00;
+    io.write(reinterpret_cast<const char*>(&nan), 2);
+  }
+  auto file = BdiChunks::open(path);
+  ASSERT_TRUE(file.ok());
+  auto spec = resolve_spec("fmf:rank=4:oversample=4:power_iters=1");
+  Context ctx;
+  fmf::Collective one;
+  auto st = encode_fmf_streamed(file.value(), b.desc(), spec->second, ctx, one);
+  ASSERT_FALSE(st.ok());
+  EXPECT_EQ(st.status().code(), StatusCode::corrupt_data);
+  EXPECT_NE(st.status().message().find("BDI chunk 2 holds a non-finite value at texel (7, 5)"), std::string::npos) << st.status().message();
+  std::remove(path.c_str());
+}
+
+TEST(BdiWork, ImageGroupsWriteTheSameFileAsTexelBands) {
+  const Btf b = synth(7, 5);
+  const BtfDesc& d = b.desc();
+  const std::string a = tmp_path("bands.btf"), c = tmp_path("images.btf");
+  ASSERT_TRUE(write_bdi(b, a, 2).ok());
+  {
+    auto w = BdiWriter::create(c, d, 2, 1.0f, "<btfc_work scale=\"1.000000\"/>");
+    ASSERT_TRUE(w.ok());
+    // Groups of 11 images (the last one short), image-major as read_images delivers them.
+    const size_t texels = d.num_texels(), nc = size_t(d.channels);
+    for (size_t i0 = 0; i0 < d.num_images(); i0 += 11) {
+      const size_t k = std::min<size_t>(11, d.num_images() - i0);
+      std::vector<float> img(k * texels * nc);
+      for (size_t j = 0; j < k; ++j)
+        for (size_t t = 0; t < texels; ++t)
+          for (size_t ch = 0; ch < nc; ++ch) img[(j * texels + t) * nc + ch] = b.abrdf(t)[(i0 + j) * nc + ch];
+      ASSERT_TRUE(w.value()->write_images(i0, k, img.data()).ok());
+    }
+    ASSERT_TRUE(w.value()->finish().ok());
+  }
+  std::ifstream fa(a, std::ios::binary), fc(c, std::ios::binary);
+  const std::string sa((std::istreambuf_iterator<char>(fa)), {}), sc((std::istreambuf_iterator<char>(fc)), {});
+  EXPECT_GT(sa.size(), d.num_values() * 2);
+  EXPECT_TRUE(sa == sc) << "the two writers' files differ";
+  std::remove(a.c_str());
+  std::remove(c.c_str());
+}

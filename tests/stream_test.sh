@@ -1,0 +1,112 @@
+#!/usr/bin/env bash
+# Out-of-core CLI checks through the real binary: `compress --max-memory` on a BTF larger than
+# the limit streams (same factorization as in core, peak RSS under limit + overhead), the
+# working file is a valid Bonn BDI, an interrupted working file is detected and rebuilt, and
+# `decompress -o OUT.btf` streams. Usage: BTFC=path/to/btfc stream_test.sh WORKDIR
+set -uo pipefail
+W=$1
+rm -rf "$W" && mkdir -p "$W"
+fails=0
+check() { # check NAME EXPECTED_EXIT CMD...
+  local name=$1 want=$2; shift 2
+  "$@" >"$W/out.txt" 2>"$W/err.txt"
+  local got=$?
+  if [ "$got" -ne "$want" ]; then
+    echo "FAIL $name: exit $got, wanted $want"; cat "$W/out.txt" "$W/err.txt"; fails=$((fails + 1))
+  else
+    echo "ok   $name"
+  fi
+}
+expect_grep() { # expect_grep NAME PATTERN FILE
+  if ! grep -q -- "$2" "$3"; then echo "FAIL $1: '$2' not in $3:"; cat "$3"; fails=$((fails + 1)); else echo "ok   $1"; fi
+}
+
+# 56 x 56 texels x 81 x 81 x RGB = 61.7 M values = 247 MB as float32; limit 40 MiB.
+SPEC=fmf:rank=16:oversample=8:power_iters=2
+check synth 0 "$BTFC" synth --width 56 --height 56 --seed 5 -o "$W/s.btfc"
+check in-core 0 "$BTFC" -q compress "$W/s.btfc" -c $SPEC -o "$W/in.btfc"
+check ooc 0 "$BTFC" --json compress "$W/s.btfc" -c $SPEC -o "$W/ooc.btfc" --max-memory 40M
+cp "$W/out.txt" "$W/ooc.json"
+ls -a "$W" | grep -q '\.btfc-work-' && { echo "FAIL temp-work-file-left"; fails=$((fails + 1)); }
+check cmp-in 0 "$BTFC" --json compare --no-ssim "$W/s.btfc" "$W/in.btfc"
+cp "$W/out.txt" "$W/cmp_in.json"
+check cmp-ooc 0 "$BTFC" --json compare --no-ssim "$W/s.btfc" "$W/ooc.btfc"
+cp "$W/out.txt" "$W/cmp_ooc.json"
+# Peak RSS bound: limit + the fixed overhead docs/scaling.md states (200 MiB: 135 MiB at
+# process start, mostly OpenImageIO's shared libraries, plus thread stacks and BLAS buffers).
+# In core the same run needs the 247 MB input on top of the start-up 135 MiB.
+python3 - "$W" <<'PY' || fails=$((fails + 1))
+import json, sys
+w = sys.argv[1]
+r = json.load(open(w + "/ooc.json"))
+o = r["out_of_core"]
+assert o["passes"] == 4, o                      # power_iters + 2
+assert o["work_file_built"] and o["chunks"] >= 2, o
+assert o["bytes_read"] == 4 * 56 * 56 * 19683 * 2, o   # 4 passes over the half working file
+limit, overhead = 40 << 20, 200 << 20
+assert o["peak_rss_bytes"] <= limit + overhead, (o["peak_rss_bytes"], limit + overhead)
+a = json.load(open(w + "/cmp_in.json"))["rel_l2"]; b = json.load(open(w + "/cmp_ooc.json"))["rel_l2"]
+assert 1e-3 < a < 0.5, a
+assert abs(a - b) / a < 0.01, (a, b)
+print("ok   ooc-vs-in-core rel_l2 %.6f vs %.6f, peak RSS %.1f MiB (limit 40 MiB + 200 MiB overhead)" % (a, b, o["peak_rss_bytes"] / 2**20))
+PY
+
+# A kept working file is a Bonn BDI btfc reads as a BTF; the second run reuses it.
+check keep 0 "$BTFC" --json compress "$W/s.btfc" -c $SPEC -o "$W/k.btfc" --work-file "$W/work.btf" --max-memory 40M
+check info-work 0 "$BTFC" info "$W/work.btf"
+expect_grep work-is-bdi "BDI" "$W/out.txt"
+check reuse 0 "$BTFC" --json compress "$W/s.btfc" -c $SPEC -o "$W/k2.btfc" --work-file "$W/work.btf" --max-memory 40M
+expect_grep reused '"work_file_reused": true' "$W/out.txt"
+# An interrupted run leaves the placeholder signature: detected, not trusted, rebuilt.
+printf '#BTFCPART!' | dd of="$W/work.btf" bs=1 count=10 conv=notrunc status=none
+check info-interrupted 2 "$BTFC" info "$W/work.btf"
+expect_grep interrupted-msg "incomplete working file" "$W/err.txt"
+check rebuild 0 "$BTFC" --json compress "$W/s.btfc" -c $SPEC -o "$W/k3.btfc" --work-file "$W/work.btf" --max-memory 40M
+expect_grep rebuilt '"work_file_built": true' "$W/out.txt"
+expect_grep rebuilt-note 'incomplete working file.*rebuilt' "$W/out.txt"
+check cmp-rebuilt 0 "$BTFC" --json compare --no-ssim "$W/k.btfc" "$W/k3.btfc"
+python3 -c "import json,sys; m=json.load(open('$W/out.txt')); assert m['rel_l2'] < 1e-6, m; print('ok   rebuilt-same-model', m['rel_l2'])" || fails=$((fails + 1))
+
+# Only fmf streams; a limit too small for one texel row is an error.
+check other-codec 1 "$BTFC" compress "$W/s.btfc" -c lpyr -o "$W/x.btfc" --max-memory 40M
+expect_grep other-codec-msg "only fmf compresses out of core" "$W/err.txt"
+check too-small 1 "$BTFC" compress "$W/s.btfc" -c $SPEC -o "$W/x.btfc" --max-memory 1M
+check bad-size 1 "$BTFC" compress "$W/s.btfc" -c $SPEC -o "$W/x.btfc" --max-memory 12Q
+[ -e "$W/x.btfc" ] && { echo "FAIL partial-output"; fails=$((fails + 1)); }
+
+# HDR beyond the half range: the working file restarts with a power-of-two scale.
+check synth-hdr 0 "$BTFC" synth --width 12 --height 10 --scale 1e6 -o "$W/h.btfc"
+check ooc-hdr 0 "$BTFC" --json compress "$W/h.btfc" -c fmf:rank=8 -o "$W/h.fmf.btfc" --work-file "$W/hw.btf"
+expect_grep hdr-scale 'restarted with scale' "$W/out.txt"
+check in-core-hdr 0 "$BTFC" -q compress "$W/h.btfc" -c fmf:rank=8:svd=randomized -o "$W/h.in.btfc"
+check cmp-hdr-in 0 "$BTFC" --json compare --no-ssim "$W/h.btfc" "$W/h.in.btfc"
+cp "$W/out.txt" "$W/hin.json"
+check cmp-hdr 0 "$BTFC" --json compare --no-ssim "$W/h.btfc" "$W/h.fmf.btfc"
+python3 -c "
+import json; a=json.load(open('$W/hin.json'))['rel_l2']; b=json.load(open('$W/out.txt'))['rel_l2']
+assert 1e-4 < a < 0.5 and abs(a - b) / a < 0.01, (a, b); print('ok   hdr-error in core %.6f, out of core %.6f' % (a, b))" || fails=$((fails + 1))
+
+# An image set (81 EXR images, one view) streams into the working file image by image.
+check synth-set 0 "$BTFC" synth --width 20 --height 16 --views 30,0 -o "$W/set"
+check set-in-core 0 "$BTFC" -q compress "$W/set" -c fmf:rank=8:svd=randomized -o "$W/set.in.btfc"
+check set-ooc 0 "$BTFC" --json compress "$W/set" -c fmf:rank=8 -o "$W/set.ooc.btfc" --work-file "$W/setw.btf"
+expect_grep set-built '"work_file_built": true' "$W/out.txt"
+check set-cmp-in 0 "$BTFC" --json compare --no-ssim "$W/set" "$W/set.in.btfc"
+cp "$W/out.txt" "$W/setin.json"
+check set-cmp-ooc 0 "$BTFC" --json compare --no-ssim "$W/set" "$W/set.ooc.btfc"
+python3 -c "
+import json; a=json.load(open('$W/setin.json'))['rel_l2']; b=json.load(open('$W/out.txt'))['rel_l2']
+assert 1e-4 < a < 0.5 and abs(a - b) / a < 0.01, (a, b); print('ok   image-set in core %.6f, out of core %.6f' % (a, b))" || fails=$((fails + 1))
+
+# decompress to a Bonn BDI streams texel bands; decompress to .btfc beyond the limit refuses.
+check decompress-bdi 0 "$BTFC" --json decompress "$W/ooc.btfc" -o "$W/d.btf" --max-memory 8M
+check cmp-bdi 0 "$BTFC" --json compare --no-ssim "$W/ooc.btfc" "$W/d.btf"
+python3 -c "import json; m=json.load(open('$W/out.txt')); assert m['rel_l2'] < 2e-3, m; print('ok   bdi-decoded', m['rel_l2'])" || fails=$((fails + 1))
+check decompress-too-big 1 "$BTFC" decompress "$W/ooc.btfc" -o "$W/d2.btfc" --max-memory 8M
+expect_grep decompress-msg "decompress to a Bonn BDI" "$W/err.txt"
+check bench-ooc 0 "$BTFC" --json bench "$W/s.btfc" -c $SPEC --max-memory 40M
+python3 -c "import json; r=json.load(open('$W/out.txt'))[0]; assert 1e-3 < r['rel_l2'] < 0.5 and r['out_of_core']['passes'] == 4, r; print('ok   bench-ooc', r['rel_l2'])" || fails=$((fails + 1))
+
+rm -rf "$W"
+[ "$fails" -eq 0 ] && echo "all stream checks passed" || echo "$fails stream checks FAILED"
+exit $((fails > 0))
