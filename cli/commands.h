@@ -84,6 +84,7 @@ struct BenchArgs {
   bool pareto = false;
   bool no_renders = false;
   size_t throughput_queries = size_t(1) << 17;
+  std::string max_memory;          // --max-memory: larger inputs stream (fmf, cli/stream_commands.cpp)
 };
 
 struct RenderArgs {
@@ -95,7 +96,6 @@ struct RenderArgs {
   std::string env;                 // lat-long EXR: environment lighting
   double intensity = 1;
   int size = 256, tiles = 1;
-  std::string max_memory;
 };
 
 // Applies --device (auto | cpu | cl) to the process (core/cl_runtime.h).

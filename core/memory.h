@@ -6,19 +6,19 @@
 #include <string>
 
 #include "core/status.h"
+#include "core/sysinfo.h"  // peak_rss_bytes
 
 namespace btfc {
 
-// "1G", "512M", "2.5g", "1048576" (bytes), "64K", "1T"; binary units (1G = 2^30 bytes).
-// Zero, negative, non-finite and unknown suffixes are invalid_argument naming `what`.
+// "1G", "512M", "4GB", "1048576" (bytes), "64K", "1T"; binary units (1G = 2^30 bytes); the
+// syntax of core/limits.h parse_byte_size. Zero, negative, fractional and unknown suffixes are
+// invalid_argument naming `what`.
 Result<size_t> parse_size(const std::string& text, const std::string& what = "--max-memory");
 
 // The default limit: 80 % of MemAvailable in /proc/meminfo (the rest is left to the page cache
 // and other processes); 4 GiB when /proc/meminfo cannot be read.
 size_t default_max_memory();
 
-// Peak resident set size of this process so far (getrusage ru_maxrss), in bytes.
-uint64_t peak_rss_bytes();
 
 // "1.50 GiB", "512.0 MiB" for messages.
 std::string format_bytes(uint64_t bytes);
