@@ -9,7 +9,7 @@ PACKAGES=(
   pocl-opencl-icd ocl-icd-opencl-dev opencl-headers opencl-clhpp-headers clinfo
   libceres-dev libopenblas-dev zlib1g-dev libbz2-dev libcli11-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
-  python3-numpy python3-skimage
+  python3-numpy python3-skimage python3-matplotlib
   libopenmpi-dev openmpi-bin
 )
 missing=()

@@ -110,5 +110,37 @@ if [ -d "${DATA_DIR:-}/ubo2003_tv000_pv000_81lights" ]; then
   python3 -c "import json,sys; m=json.load(open(sys.argv[1])); assert 0.005 < m['rel_l2'] < 0.2 and m['mean_ssim'] > 0.8, m; print('ok   real-values', m)" "$W/out.txt" || fails=$((fails + 1))
 fi
 
+# bench: sweeps, CSV / JSON reports, side-by-side renders, Pareto fronts, determinism.
+check bench-sweep 0 "$BTFC" -q bench "$W/s.btfc" -c fmf:rank=2,6 -c lpca:clusters=2:components=2 --csv "$W/b.csv" --json-out "$W/b.json" --renders "$W/rend" --pareto --throughput-queries 2000
+expect_grep bench-pareto "Pareto front by psnr" "$W/out.txt"
+python3 - "$W/b.csv" "$W/b.json" <<'PY' || fails=$((fails + 1))
+import csv, json, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+assert [r["spec_given"] for r in rows] == ["fmf:rank=2", "fmf:rank=6", "lpca:clusters=2:components=2"], rows
+assert float(rows[1]["psnr"]) > float(rows[0]["psnr"]) and int(rows[1]["payload_bytes"]) > int(rows[0]["payload_bytes"]), rows
+for r in rows:
+    assert 0 < float(r["render_ssim"]) <= 1 and float(r["evals_per_s"]) > 0 and float(r["peak_rss_mb"]) > 0, r
+    assert "bench" in r["command"] and r["machine"], r
+j = json.load(open(sys.argv[2]))
+assert len(j["runs"]) == 3 and j["btfc_version"] and j["machine"], j
+print("ok   bench-reports")
+PY
+[ -f "$W/rend/s.btfc-0-fmf_rank=2-flat.png" ] && [ -f "$W/rend/s.btfc-2-lpca_clusters=2_components=2-sphere.png" ] && echo "ok   bench-renders" || { echo "FAIL bench-renders"; ls "$W/rend"; fails=$((fails + 1)); }
+check bench-again 0 "$BTFC" -q bench "$W/s.btfc" -c fmf:rank=2 --csv "$W/b2.csv" --no-renders --throughput-queries 0
+python3 -c "import csv,sys; a=list(csv.DictReader(open(sys.argv[1])))[0]; b=list(csv.DictReader(open(sys.argv[2])))[0]; assert a['tensor_digest']==b['tensor_digest'] and a['rmse']==b['rmse'], (a,b); print('ok   bench-deterministic')" "$W/b.csv" "$W/b2.csv" || fails=$((fails + 1))
+check bench-bad-sweep 1 "$BTFC" bench "$W/s.btfc" -c fmf:rank=2,,4
+check bench-bad-range 1 "$BTFC" bench "$W/s.btfc" -c fmf:rank=0,4
+# budget targeting
+check target-psnr 0 "$BTFC" --json compress "$W/s.btfc" -c fmf -o "$W/t.btfc" --target-psnr 30
+python3 -c "import json,sys; j=json.load(open(sys.argv[1])); t=j['target']; assert t['knob']=='rank' and t['reached']>=30, t; print('ok   target-psnr-values', t['value'], t['reached'])" "$W/out.txt" || fails=$((fails + 1))
+check target-unreachable 1 "$BTFC" compress "$W/s.btfc" -c fmf:precision=half -o "$W/t2.btfc" --target-psnr 500
+[ ! -e "$W/t2.btfc" ] && echo "ok   target-no-output" || { echo "FAIL target-no-output"; fails=$((fails + 1)); }
+check target-two 1 "$BTFC" compress "$W/s.btfc" -c fmf -o "$W/t3.btfc" --target-psnr 30 --max-bytes 1000
+# render
+check render-flat 0 "$BTFC" render "$W/m.btfc" -o "$W/r.png" --light 30,45 --distance 2
+check render-sphere 0 "$BTFC" render "$W/s.btfc" -o "$W/r.exr" --shape sphere --size 48
+check render-below 1 "$BTFC" render "$W/m.btfc" -o "$W/r2.png" --view 120,0
+[ ! -e "$W/r2.png" ] && echo "ok   render-no-output" || { echo "FAIL render-no-output"; fails=$((fails + 1)); }
+
 echo "$fails failure(s)"
 [ "$fails" -eq 0 ]

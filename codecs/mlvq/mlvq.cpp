@@ -19,7 +19,7 @@ const ParamSpec k_params[] = {
     {"ssim4", ParamSpec::Type::real, "0.9", 0, 1, {}, "SSIM threshold for reusing a 4D codebook entry (per texel)"},
     {"ssim3", ParamSpec::Type::real, "0.9", 0, 1, {}, "SSIM threshold for 3D entries (per view azimuth)"},
     {"ssim2", ParamSpec::Type::real, "0.95", 0, 1, {}, "SSIM threshold for 2D entries (per view elevation)"},
-    {"ssim1", ParamSpec::Type::real, "0.98", 0, 1, {}, "SSIM threshold for 1D entries (per light alpha)"},
+    {"ssim1", ParamSpec::Type::real, "0.98", 0, 1, {}, "SSIM threshold for 1D entries (per light alpha)", true},
     {"phi", ParamSpec::Type::integer, "16", 1, 64, {}, "view azimuth nodes (level 4)"},
     {"theta", ParamSpec::Type::integer, "7", 2, 64, {}, "view elevation nodes over [0, 90] degrees (level 3)"},
     {"alpha", ParamSpec::Type::integer, "11", 2, 63, {}, "light alpha nodes over [-90, 90] degrees (level 2)"},

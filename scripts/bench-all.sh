@@ -1,0 +1,22 @@
+#!/usr/bin/env bash
+# Runs `btfc bench` over every codec (with a sweep of each one's quality knob) on the embedded
+# synthetic BTF and on the real measured slice in ../shared/data (when present), then draws the
+# plots (docs/plots/) and regenerates the bench table in docs/benchmarks.md from the CSV.
+#   scripts/bench-all.sh [OUT_DIR]      (default build/bench-all; a few minutes on 2 cores)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+scripts/setup.sh
+scripts/build.sh >/dev/null
+BTFC=${BTFC:-build/btfc}
+OUT=${1:-build/bench-all}
+mkdir -p "$OUT"
+CSV="$OUT/bench.csv"
+rm -f "$CSV"
+specs=(-c fmf:rank=2,4,8,16,32 -c lpyr:y=2,4,8 -c lpca:clusters=8:components=2,4,8 -c mlvq:scheme=2:ssim1=0.9,0.97,0.99)
+"$BTFC" -q synth --width 64 --height 64 -o "$OUT/synthetic-64.btfc"
+"$BTFC" bench "$OUT/synthetic-64.btfc" --label synthetic-64 "${specs[@]}" --csv "$CSV" --append --renders "$OUT/renders" --pareto
+REAL=../shared/data/ubo2003_tv000_pv000_81lights
+if [ -d "$REAL" ]; then
+  "$BTFC" bench "$REAL" --label ubo2003-slice "${specs[@]}" --csv "$CSV" --append --renders "$OUT/renders" --pareto
+fi
+python3 scripts/plot_bench.py docs/plots "$CSV" --doc docs/benchmarks.md

@@ -1,0 +1,242 @@
+// Tests of the measuring side: sweep expansion, Pareto fronts, benchmark determinism, budget
+// targeting (codecs/target.h) and the CPU renderer (codecs/render.h).
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "codecs/lpca/lpca.h"
+#include "codecs/measure.h"
+#include "codecs/target.h"
+#include "core/synth.h"
+
+using namespace btfc;
+
+namespace {
+
+constexpr double k_pi = 3.14159265358979323846;
+
+Btf small_btf(int w = 12, int h = 12) {
+  SynthOptions o;
+  o.width = w, o.height = h;
+  auto b = synthesize_btf(o);
+  EXPECT_TRUE(b.ok()) << b.status().message();
+  return std::move(b).value();
+}
+
+Btf constant_btf(float value, int w = 8, int h = 6) {
+  BtfDesc d;
+  d.width = w, d.height = h;
+  d.lights = DirectionSet::ubo2003(), d.views = DirectionSet::ubo2003();
+  auto b = Btf::create(d);
+  EXPECT_TRUE(b.ok());
+  std::fill(b->data(), b->data() + b->size(), value);
+  return std::move(b).value();
+}
+
+Metrics measure(const Btf& ref, const std::string& spec) {
+  auto r = resolve_spec(spec);
+  EXPECT_TRUE(r.ok()) << r.status().message();
+  Context ctx;
+  auto m = r->first->encode(ref, r->second, ctx);
+  EXPECT_TRUE(m.ok()) << m.status().message();
+  Btf out;
+  EXPECT_TRUE(m.value()->decode_all(out).ok());
+  return compare_btf(ref, out, false).value();
+}
+
+uint64_t bytes_of(const Btf& ref, const std::string& spec) {
+  auto r = resolve_spec(spec);
+  Context ctx;
+  return r->first->encode(ref, r->second, ctx).value()->payload_bytes();
+}
+
+}  // namespace
+
+TEST(Sweep, ExpandsCommaListsInOrder) {
+  auto s = expand_sweep("fmf:rank=4,8:precision=half,float");
+  ASSERT_TRUE(s.ok()) << s.status().message();
+  EXPECT_EQ(*s, (std::vector<std::string>{"fmf:rank=4:precision=half", "fmf:rank=4:precision=float",
+                                          "fmf:rank=8:precision=half", "fmf:rank=8:precision=float"}));
+  EXPECT_EQ(expand_sweep("lpyr").value(), std::vector<std::string>{"lpyr"});
+  EXPECT_FALSE(expand_sweep("fmf:rank=4,,8").ok());
+  EXPECT_FALSE(expand_sweep("fmf:rank").ok());
+}
+
+TEST(Pareto, KeepsOnlyRunsThatBeatEveryCheaperOne) {
+  std::vector<BenchResult> r(4);
+  const uint64_t bytes[4] = {100, 200, 150, 300};
+  const double psnr[4] = {20, 25, 26, 24};
+  std::vector<const BenchResult*> p;
+  for (int i = 0; i < 4; ++i) r[size_t(i)].payload_bytes = bytes[i], r[size_t(i)].metrics.psnr = psnr[i], p.push_back(&r[size_t(i)]);
+  const auto front = pareto_front(p, [](const BenchResult& b) { return b.metrics.psnr; });
+  EXPECT_EQ(front, (std::vector<size_t>{0, 2}));  // 200 B at 25 dB loses to 150 B at 26 dB; 300 B at 24 dB too
+}
+
+TEST(Bench, SameSpecSameDataGivesSameBytesAndMetrics) {
+  const Btf b = small_btf();
+  BenchOptions opt;
+  opt.throughput_queries = 1000, opt.throughput_seconds = 0;
+  for (const char* spec : {"fmf:rank=4", "lpca:clusters=3:components=2", "lpyr"}) {
+    auto r1 = run_benchmark(b, spec, opt), r2 = run_benchmark(b, spec, opt);
+    ASSERT_TRUE(r1.ok() && r2.ok()) << spec;
+    EXPECT_EQ(r1->tensor_digest, r2->tensor_digest) << spec;
+    EXPECT_NE(r1->tensor_digest, 0u);
+    EXPECT_EQ(r1->payload_bytes, r2->payload_bytes);
+    EXPECT_EQ(r1->metrics.rmse, r2->metrics.rmse);
+    EXPECT_EQ(r1->metrics.mean_ssim, r2->metrics.mean_ssim);
+    EXPECT_EQ(r1->render_ssim, r2->render_ssim);
+    EXPECT_GT(r1->render_ssim, 0.3);
+    EXPECT_LE(r1->render_ssim, 1.0);
+    EXPECT_GT(r1->evals_per_second, 0);
+    EXPECT_GT(r1->peak_rss_bytes, 0u);
+  }
+  auto a = run_benchmark(b, "fmf:rank=4", opt), c = run_benchmark(b, "fmf:rank=5", opt);
+  EXPECT_NE(a->tensor_digest, c->tensor_digest);
+  // More rank: more bytes, lower error (the ratio columns mean what they say).
+  EXPECT_GT(c->payload_bytes, a->payload_bytes);
+  EXPECT_LT(c->metrics.rmse, a->metrics.rmse);
+  EXPECT_NEAR(a->ratio, double(b.desc().num_values()) * 4 / double(a->payload_bytes), 1e-9);
+}
+
+TEST(Target, PsnrChoosesTheCheapestRankThatMeetsIt) {
+  const Btf b = small_btf();
+  const double p4 = measure(b, "fmf:rank=4:svd=exact").psnr, p9 = measure(b, "fmf:rank=9:svd=exact").psnr;
+  ASSERT_LT(p4, p9);
+  Target t{Target::Kind::psnr, 0.5 * (p4 + p9)};
+  Context ctx;
+  auto c = choose_for_target(b, "fmf:svd=exact", t, ctx);
+  ASSERT_TRUE(c.ok()) << c.status().message();
+  EXPECT_EQ(c->knob, "rank");
+  const int k = int(c->knob_value);
+  EXPECT_GT(k, 4);
+  EXPECT_LE(k, 9);
+  EXPECT_GE(c->measure, t.value);
+  EXPECT_GE(measure(b, "fmf:svd=exact:rank=" + std::to_string(k)).psnr, t.value);
+  EXPECT_LT(measure(b, "fmf:svd=exact:rank=" + std::to_string(k - 1)).psnr, t.value);  // next cheaper misses
+  EXPECT_EQ(c->spec, c->model->spec());
+}
+
+TEST(Target, SsimOnLpcaComponents) {
+  const Btf b = small_btf();
+  Context ctx;
+  auto c = choose_for_target(b, "lpca:clusters=2:components=2", Target{Target::Kind::ssim, 0.9}, ctx);
+  ASSERT_TRUE(c.ok()) << c.status().message();
+  EXPECT_EQ(c->knob, "components");
+  EXPECT_GE(c->measure, 0.9);
+  const int k = int(c->knob_value);
+  if (k > 1) {
+    auto r = resolve_spec("lpca:clusters=2:components=" + std::to_string(k - 1));
+    auto m = r->first->encode(b, r->second, ctx);
+    Btf out;
+    ASSERT_TRUE(m.value()->decode_all(out).ok());
+    EXPECT_LT(compare_btf(b, out, true)->mean_ssim, 0.9);
+  }
+}
+
+TEST(Target, ByteBudgetChoosesTheLargestThatFits) {
+  const Btf b = small_btf();
+  const uint64_t b6 = bytes_of(b, "fmf:rank=6"), b7 = bytes_of(b, "fmf:rank=7");
+  Context ctx;
+  auto c = choose_for_target(b, "fmf", Target{Target::Kind::max_bytes, double(b6 + (b7 - b6) / 2)}, ctx);
+  ASSERT_TRUE(c.ok()) << c.status().message();
+  EXPECT_EQ(int(c->knob_value), 6);
+  EXPECT_LE(c->model->payload_bytes(), b6);
+}
+
+TEST(Target, UnreachableTargetsAreErrors) {
+  const Btf b = small_btf(6, 6);
+  Context ctx;
+  auto hi = choose_for_target(b, "fmf:precision=half", Target{Target::Kind::psnr, 400}, ctx);
+  ASSERT_FALSE(hi.ok());
+  EXPECT_NE(hi.status().message().find("out of reach"), std::string::npos) << hi.status().message();
+  EXPECT_FALSE(choose_for_target(b, "fmf", Target{Target::Kind::max_bytes, 10}, ctx).ok());
+  EXPECT_FALSE(choose_for_target(b, "fmf", Target{Target::Kind::ssim, 1.5}, ctx).ok());
+  EXPECT_FALSE(choose_for_target(b, "fmf:bogus=1", Target{Target::Kind::psnr, 20}, ctx).ok());
+}
+
+TEST(Render, ConstantBtfUnderDirectionalPointAndEnvironmentLight) {
+  const float c = 0.25f;
+  const Btf b = constant_btf(c);
+  RenderSettings s;
+  s.light = dir_from_theta_phi(0.5, 1.0);
+  auto img = render(b.desc(), btf_evaluator(b), s);
+  ASSERT_TRUE(img.ok()) << img.status().message();
+  ASSERT_EQ(img->width, 8);
+  for (float v : img->rgb) EXPECT_NEAR(v, c, 1e-6);
+  // Point light straight above the centre at distance 2: falloff (d / r)^2 at a corner.
+  s.light_kind = RenderSettings::LightKind::point;
+  s.light = {0, 0, 1};
+  img = render(b.desc(), btf_evaluator(b), s);
+  const double x = 0.5 - 0.5 / 8, y = (0.5 - 0.5 / 6) * 6.0 / 8;
+  EXPECT_NEAR(img->rgb[0], c * 4 / (4 + x * x + y * y), 1e-5);
+  // Uniform white environment: radiance = c x (sum of the cell solid angles) = c x 2 pi.
+  s.light_kind = RenderSettings::LightKind::environment;
+  s.environment = {16, 8, std::vector<float>(16 * 8 * 3, 1.f)};
+  img = render(b.desc(), btf_evaluator(b), s);
+  for (float v : img->rgb) EXPECT_NEAR(v, c * 2 * k_pi, 1e-4);
+}
+
+TEST(Render, SphereLitFromTheCameraCoversTheDisc) {
+  const Btf b = constant_btf(1.f);
+  RenderSettings s;
+  s.shape = RenderSettings::Shape::sphere;
+  s.size = 64, s.view = {0, 0, 1}, s.light = {0, 0, 1};
+  auto img = render(b.desc(), btf_evaluator(b), s);
+  ASSERT_TRUE(img.ok());
+  size_t lit = 0;
+  for (size_t k = 0; k < img->rgb.size(); k += 3) lit += img->rgb[k] > 0.5f;
+  EXPECT_NEAR(double(lit) / (64.0 * 64.0), k_pi / 4, 0.01);
+  EXPECT_EQ(img->rgb[0], 0.f);  // corner: background
+}
+
+TEST(Render, ModelRendersLikeItsDataAndEnvironmentMatchesLpcaRelight) {
+  const Btf b = small_btf(10, 10);
+  auto r = resolve_spec("lpca:clusters=1:components=60:precision=float:sh_order=12");
+  Context ctx;
+  auto m = r->first->encode(b, r->second, ctx);
+  ASSERT_TRUE(m.ok()) << m.status().message();
+  RenderSettings s;
+  s.light_kind = RenderSettings::LightKind::environment;
+  s.view = dir_from_theta_phi(0.4, 0.7);
+  s.environment.width = 64, s.environment.height = 32;
+  for (int j = 0; j < 32; ++j)  // smooth sky: brighter towards the zenith and towards +x
+    for (int i = 0; i < 64; ++i) {
+      const double th = k_pi * (j + 0.5) / 32, ph = 2 * k_pi * (i + 0.5) / 64;
+      const float v = float(1 + std::cos(th) + 0.5 * std::sin(th) * std::cos(ph));
+      s.environment.rgb.insert(s.environment.rgb.end(), {v, 0.8f * v, 0.6f * v});
+    }
+  auto data = render(b.desc(), btf_evaluator(b), s);
+  auto model = render(b.desc(), model_evaluator(*m.value()), s);
+  ASSERT_TRUE(data.ok() && model.ok());
+  EXPECT_GT(render_ssim(data.value(), model.value()), 0.99);
+  // Brute-force quadrature over the measured lights vs lpca's SH relighting of the same lighting.
+  auto env = project_latlong(s.environment.rgb.data(), 64, 32, 12);
+  ASSERT_TRUE(env.ok());
+  int w = 0, h = 0;
+  auto relit = relight(*m.value(), env.value(), s.view, w, h);
+  ASSERT_TRUE(relit.ok()) << relit.status().message();
+  double num = 0, den = 0;
+  for (size_t k = 0; k < relit->size(); ++k) {
+    num += std::pow(double((*relit)[k]) - model->rgb[k], 2);
+    den += std::pow(double(model->rgb[k]), 2);
+  }
+  const double rel = std::sqrt(num / den);
+  std::printf("environment render vs SH relight (order 12): relative L2 %.3e\n", rel);
+  EXPECT_LT(rel, 0.05);
+}
+
+TEST(Render, BadInputsAreErrors) {
+  const Btf b = constant_btf(1.f);
+  RenderSettings s;
+  s.view = {0, 0.5f, -0.8f};
+  EXPECT_FALSE(render(b.desc(), btf_evaluator(b), s).ok());  // below the horizon
+  s.view = {0, 0, 1};
+  s.light_kind = RenderSettings::LightKind::environment;
+  EXPECT_FALSE(render(b.desc(), btf_evaluator(b), s).ok());  // no environment
+  s.environment = {2, 1, {1, 1, NAN, 1, 1, 1}};
+  EXPECT_FALSE(render(b.desc(), btf_evaluator(b), s).ok());
+  RgbImage a{2, 2, std::vector<float>(12, 0.5f)};
+  const RgbImage sbs = side_by_side(a, a, 5);
+  EXPECT_EQ(sbs.width, 3 * 2 + 8);
+  EXPECT_EQ(render_ssim(a, a), 1.0);
+}
