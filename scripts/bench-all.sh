@@ -19,4 +19,5 @@ REAL=../shared/data/ubo2003_tv000_pv000_81lights
 if [ -d "$REAL" ]; then
   "$BTFC" bench "$REAL" --label ubo2003-slice "${specs[@]}" --csv "$CSV" --append --renders "$OUT/renders" --pareto
 fi
-python3 scripts/plot_bench.py docs/plots "$CSV" --doc docs/benchmarks.md
+# Debian's interpreter: python3-matplotlib is installed for it, not for a pyenv python3 on PATH.
+/usr/bin/python3 scripts/plot_bench.py docs/plots "$CSV" --doc docs/benchmarks.md

@@ -1,4 +1,4 @@
-#!/usr/bin/env python3
+#!/usr/bin/python3
 """Plots and a markdown table from `btfc bench --csv` output (one or more CSV files).
 
   scripts/plot_bench.py OUT_DIR run1.csv [run2.csv ...] [--doc docs/benchmarks.md]

@@ -222,7 +222,9 @@ TEST(Render, ModelRendersLikeItsDataAndEnvironmentMatchesLpcaRelight) {
   }
   const double rel = std::sqrt(num / den);
   std::printf("environment render vs SH relight (order 12): relative L2 %.3e\n", rel);
-  EXPECT_LT(rel, 0.05);
+  // Measured 9.1e-4: the bilinear lookup of the 64 x 32 map vs its exact SH projection.
+  EXPECT_LE(rel, 1.1e-3);
+  EXPECT_GE(rel, 0.75 * 1.1e-3);
 }
 
 TEST(Render, BadInputsAreErrors) {
