@@ -15,6 +15,7 @@
 #include <fstream>
 #include <random>
 
+#include "tests/require_cl.h"
 #include "codecs/codec.h"
 #include "codecs/fmf/fmf_cl.h"
 #include "codecs/lpca/clustering.h"
@@ -29,21 +30,6 @@ using namespace btfc;
 
 namespace {
 
-bool have_cl(std::string* why) {
-  if (ocl::device_choice() == ocl::DeviceChoice::cpu) {
-    *why = "BTFC_FORCE_CPU=1: OpenCL comparisons skipped, CPU path only";
-    return false;
-  }
-  auto rt = ocl::Runtime::get();
-  if (!rt.ok()) *why = "no OpenCL device: " + rt.status().message();
-  return rt.ok();
-}
-
-#define REQUIRE_CL()                           \
-  do {                                         \
-    std::string why_;                          \
-    if (!have_cl(&why_)) GTEST_SKIP() << why_; \
-  } while (0)
 
 // max |a - b| / max(1e-30, max |b|): relative to the data's scale.
 double rel_diff(const float* a, const float* b, size_t n) {

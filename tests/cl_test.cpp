@@ -9,6 +9,7 @@
 #include <fstream>
 #include <random>
 
+#include "tests/require_cl.h"
 #include "codecs/codec.h"
 #include "codecs/fmf/fmf_cl.h"
 #include "core/cl_runtime.h"
@@ -18,21 +19,6 @@ using namespace btfc;
 
 namespace {
 
-bool have_cl(std::string* why) {
-  if (ocl::device_choice() == ocl::DeviceChoice::cpu) {
-    *why = "BTFC_FORCE_CPU=1: OpenCL comparisons skipped, CPU path only";
-    return false;
-  }
-  auto rt = ocl::Runtime::get();
-  if (!rt.ok()) *why = "no OpenCL device: " + rt.status().message();
-  return rt.ok();
-}
-
-#define REQUIRE_CL()                      \
-  do {                                    \
-    std::string why_;                     \
-    if (!have_cl(&why_)) GTEST_SKIP() << why_; \
-  } while (0)
 
 fmf_cl::PackedFactors random_factors(int mode, int C, int nL, int nV, int texels, unsigned seed) {
   std::mt19937 rng(seed);

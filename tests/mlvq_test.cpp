@@ -11,6 +11,7 @@
 #include <iterator>
 #include <random>
 
+#include "tests/require_cl.h"
 #include "codecs/mlvq/mlvq.h"
 #include "codecs/mlvq/mlvq_cl.h"
 #include "codecs/mlvq/mlvq_internal.h"
@@ -69,20 +70,6 @@ Btf decode_all(const Model& m) {
   return out;
 }
 
-bool have_cl(std::string* why) {
-  if (ocl::device_choice() == ocl::DeviceChoice::cpu) {
-    *why = "BTFC_FORCE_CPU=1: OpenCL comparisons skipped, CPU path only";
-    return false;
-  }
-  auto rt = ocl::Runtime::get();
-  if (!rt.ok()) *why = "no OpenCL device: " + rt.status().message();
-  return rt.ok();
-}
-#define REQUIRE_CL()                           \
-  do {                                         \
-    std::string why_;                          \
-    if (!have_cl(&why_)) GTEST_SKIP() << why_; \
-  } while (0)
 
 // A small textured BTF that encodes in well under a second.
 const std::string k_small = "mlvq:phi=8:theta=4:alpha=7:beta=7";
