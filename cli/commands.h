@@ -121,3 +121,12 @@ bool decompress_streamed(const Global& g, const DecompressArgs& a, int& code);
 bool bench_streamed(const Global& g, const BenchArgs& a, int& code);
 
 }  // namespace btfc::cli
+
+namespace CLI {
+class App;
+}
+namespace btfc::cli {
+// `btfc export` (cli/export_commands.cpp) registers itself: its arguments live in that file.
+void add_export_commands(CLI::App& app, const Global& g, int& code);
+
+}  // namespace btfc::cli

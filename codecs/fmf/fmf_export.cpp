@@ -1,0 +1,226 @@
+// fmf GPU export: the renderer of seed 000 section 4 (eigen-ABRDFs x eigen-textures, Delaunay
+// direction interpolation in parabolic coordinates, 9 lookups).
+//
+// Textures (formats/gpu/export.h for the shader contract):
+//   eigen_texture  2D array W x H, sum_b ceil(C_b / 4) layers, RGBA = components 4j..4j+3 of
+//                  block b's SxV (eigen-textures, V Sigma) / scale; full mip chain (box filter:
+//                  a mip level of the eigen-textures is exactly the mip level of the BTF).
+//   eigen_abrdf    2D array nL x nV (x = light, y = view), layer aoff_b + r * K_b + j holds
+//                  components 4j..4j+3 of block b's U row for (light, view, colour r).
+//   dir_index / dir_weight   parabolic Delaunay maps (layer 0 lights, 1 views).
+// Blocks: color=rgb one block whose rows are (colour r, light, view); color=dfmf blocks y, u, v
+// (rows (light, view)) decoded in the shader as the model does (Ylog, U/Y, V/Y -> RGB).
+#include <cmath>
+
+#include "codecs/fmf/fmf.h"
+#include "formats/gpu/export.h"
+
+namespace btfc::gpu {
+namespace {
+
+constexpr float k_drr_eps = 1e-5f;
+constexpr float k_rgb_from_yuv[3][3] = {{1, 0, 1.13983f}, {1, -0.39465f, -0.5806f}, {1, 2.03211f, 0}};
+
+struct Layout {
+  int mode = 0;  // 0: rgb block, linear; 12: rgb block, exp(v) - eps; 11: dfmf y/u/v
+  int nb = 1;
+  int K[3] = {0, 0, 0}, R[3] = {0, 0, 0}, toff[3] = {0, 0, 0}, aoff[3] = {0, 0, 0};
+  int tex_layers = 0, abrdf_layers = 0;
+};
+
+Layout layout_of(const ExportBundle& b) {
+  const nlohmann::json& e = b.evaluation;
+  Layout L;
+  L.mode = e.at("color_mode").get<int>();
+  L.nb = int(e.at("blocks").size());
+  for (int i = 0; i < L.nb; ++i) {
+    const nlohmann::json& bl = e.at("blocks")[size_t(i)];
+    L.K[i] = bl.at("layers").get<int>(), L.R[i] = bl.at("rows_per_direction_pair").get<int>();
+    L.toff[i] = bl.at("texture_layer_offset").get<int>(), L.aoff[i] = bl.at("abrdf_layer_offset").get<int>();
+  }
+  return L;
+}
+
+// One factorized value: block b, row r, texel xy, measured (l, v), from stored texels.
+float block_value(const GpuTexture& T, const GpuTexture& A, const Layout& L, int b, int r, int x, int y, int l, int v) {
+  float s = 0;
+  for (int j = 0; j < L.K[b]; ++j) {
+    const float* t = &T.f[0][((size_t(L.toff[b] + j) * T.height + size_t(y)) * T.width + size_t(x)) * 4];
+    const float* a = &A.f[0][((size_t(L.aoff[b] + r * L.K[b] + j) * A.height + size_t(v)) * A.width + size_t(l)) * 4];
+    s += t[0] * a[0] + t[1] * a[1] + t[2] * a[2] + t[3] * a[3];
+  }
+  return s * float(T.scale);
+}
+
+void measured(const ExportBundle& b, const Layout& L, int x, int y, int l, int v, float* rgb) {
+  const GpuTexture& T = *b.find("eigen_texture");
+  const GpuTexture& A = *b.find("eigen_abrdf");
+  rgb[0] = rgb[1] = rgb[2] = 0;
+  if (L.mode != 11) {
+    for (int c = 0; c < L.R[0] && c < 3; ++c) {
+      rgb[c] = block_value(T, A, L, 0, c, x, y, l, v);
+      if (L.mode == 12) rgb[c] = std::exp(rgb[c]) - k_drr_eps;
+    }
+    return;
+  }
+  const float Y = std::exp(block_value(T, A, L, 0, 0, x, y, l, v)) - k_drr_eps;
+  const float yuv[3] = {Y, block_value(T, A, L, 1, 0, x, y, l, v) * (Y + k_drr_eps), block_value(T, A, L, 2, 0, x, y, l, v) * (Y + k_drr_eps)};
+  for (int c = 0; c < 3; ++c) rgb[c] = k_rgb_from_yuv[c][0] * yuv[0] + k_rgb_from_yuv[c][1] * yuv[1] + k_rgb_from_yuv[c][2] * yuv[2];
+}
+
+void emulate(const ExportBundle& b, const ShaderQuery& q, float* rgb) {
+  const Layout L = layout_of(b);
+  int x, y;
+  uv_texel(q.u, q.v, b.desc.width, b.desc.height, x, y);
+  if (q.light >= 0) return measured(b, L, x, y, q.light, q.view, rgb);
+  const GpuTexture& I = *b.find("dir_index");
+  const GpuTexture& W = *b.find("dir_weight");
+  const int n = int(I.width);
+  int lx, ly, vx, vy;
+  direction_cell(q.wl, n, lx, ly);
+  direction_cell(q.wv, n, vx, vy);
+  const size_t la = (size_t(ly) * size_t(n) + size_t(lx)) * 4, va = ((size_t(n) + size_t(vy)) * size_t(n) + size_t(vx)) * 4;
+  float acc[3] = {0, 0, 0}, tmp[3];
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      const float w = W.f[0][la + size_t(i)] * W.f[0][va + size_t(j)];
+      if (w == 0) continue;
+      measured(b, L, x, y, int(I.u[0][la + size_t(i)]), int(I.u[0][va + size_t(j)]), tmp);
+      for (int c = 0; c < 3; ++c) acc[c] += w * tmp[c];
+    }
+  for (int c = 0; c < 3; ++c) rgb[c] = acc[c];
+}
+
+std::string shader(const ExportBundle& b, const Layout& L) {
+  auto f = [](double v) {
+    char s[64];
+    std::snprintf(s, sizeof s, "%.9g", v);
+    std::string r = s;
+    if (r.find_first_of(".e") == std::string::npos) r += ".0";
+    return r;
+  };
+  std::string s = "#version 300 es\n// btfc fmf reference shader: " + b.spec + "\n" +
+                  "// rho(x, l, v) = sum_c U_c(l, v) SxV_c(x) (seed 000 section 4); 9-lookup Delaunay blend.\n"
+                  "precision highp float;\nprecision highp int;\n"
+                  "uniform highp sampler2DArray u_eigen_texture;\nuniform highp sampler2DArray u_eigen_abrdf;\n"
+                  "uniform highp usampler2DArray u_dir_index;\nuniform highp sampler2DArray u_dir_weight;\n";
+  s += glsl_common();
+  s += "const ivec2 SIZE = ivec2(" + std::to_string(b.desc.width) + ", " + std::to_string(b.desc.height) + ");\n";
+  s += "const int DIR_N = " + std::to_string(b.find("dir_index")->width) + ";\n";
+  s += "const float TEX_SCALE = " + f(b.find("eigen_texture")->scale) + ";\n";
+  s += "float fmf_block(int toff, int aoff, int K, ivec2 xy, ivec2 lv) {\n"
+       "  float s = 0.0;\n"
+       "  for (int j = 0; j < K; ++j)\n"
+       "    s += dot(texelFetch(u_eigen_texture, ivec3(xy, toff + j), 0), texelFetch(u_eigen_abrdf, ivec3(lv, aoff + j), 0));\n"
+       "  return s * TEX_SCALE;\n}\n";
+  s += "vec3 fmf_measured(ivec2 xy, int l, int v) {\n  ivec2 lv = ivec2(l, v);\n  vec3 c = vec3(0.0);\n";
+  auto blk = [&](int i, int r) {
+    return "fmf_block(" + std::to_string(L.toff[i]) + ", " + std::to_string(L.aoff[i] + r * L.K[i]) + ", " + std::to_string(L.K[i]) + ", xy, lv)";
+  };
+  if (L.mode != 11) {
+    for (int c = 0; c < L.R[0] && c < 3; ++c) {
+      std::string v = blk(0, c);
+      if (L.mode == 12) v = "exp(" + v + ") - " + f(k_drr_eps);
+      s += "  c[" + std::to_string(c) + "] = " + v + ";\n";
+    }
+  } else {
+    s += "  float Y = exp(" + blk(0, 0) + ") - " + f(k_drr_eps) + ";\n";
+    s += "  vec3 yuv = vec3(Y, " + blk(1, 0) + " * (Y + " + f(k_drr_eps) + "), " + blk(2, 0) + " * (Y + " + f(k_drr_eps) + "));\n";
+    for (int c = 0; c < 3; ++c)
+      s += "  c[" + std::to_string(c) + "] = " + f(k_rgb_from_yuv[c][0]) + " * yuv.x + " + f(k_rgb_from_yuv[c][1]) + " * yuv.y + " +
+           f(k_rgb_from_yuv[c][2]) + " * yuv.z;\n";
+  }
+  s += "  return c;\n}\n";
+  s += "vec3 btf_eval_measured(vec2 uv, int light, int view) {\n  return fmf_measured(btfc_texel(uv, SIZE), light, view);\n}\n";
+  s += "vec3 btf_eval(vec2 uv, vec3 wl, vec3 wv) {\n"
+       "  ivec2 xy = btfc_texel(uv, SIZE);\n"
+       "  ivec2 cl = btfc_dir_cell(wl, DIR_N), cv = btfc_dir_cell(wv, DIR_N);\n"
+       "  uvec4 il = texelFetch(u_dir_index, ivec3(cl, 0), 0), iv = texelFetch(u_dir_index, ivec3(cv, 1), 0);\n"
+       "  vec4 al = texelFetch(u_dir_weight, ivec3(cl, 0), 0), av = texelFetch(u_dir_weight, ivec3(cv, 1), 0);\n"
+       "  vec3 acc = vec3(0.0);\n"
+       "  for (int i = 0; i < 3; ++i)\n"
+       "    for (int j = 0; j < 3; ++j) {\n"
+       "      float w = al[i] * av[j];\n"
+       "      if (w != 0.0) acc += w * fmf_measured(xy, int(il[i]), int(iv[j]));\n"
+       "    }\n"
+       "  return acc;\n}\n";
+  s += "#ifndef BTFC_NO_MAIN\nin vec2 v_uv;\nin vec3 v_wl;\nin vec3 v_wv;\nout vec4 btf_color;\n"
+       "void main() { btf_color = vec4(btf_eval(v_uv, normalize(v_wl), normalize(v_wv)), 1.0); }\n#endif\n";
+  return s;
+}
+
+Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
+  BTFC_ASSIGN_OR_RETURN(FmfFactorsView fv, fmf_factors(model));
+  const BtfDesc& d = model.desc();
+  Layout L;
+  L.mode = fv.per_channel ? 11 : fv.bonn_color_model;
+  if ((fv.per_channel && fv.bonn_color_model != 11) || (!fv.per_channel && L.mode != 0 && L.mode != 12))
+    return unsupported("export: fmf colour model " + std::to_string(fv.bonn_color_model) + " has no shader (rgb and dfmf only)");
+  L.nb = int(fv.blocks.size());
+  for (int i = 0; i < L.nb; ++i) {
+    L.K[i] = std::max(1, (fv.blocks[size_t(i)].C + 3) / 4);
+    L.R[i] = fv.per_channel ? 1 : d.channels;
+    L.toff[i] = L.tex_layers, L.aoff[i] = L.abrdf_layers;
+    L.tex_layers += L.K[i], L.abrdf_layers += L.K[i] * L.R[i];
+  }
+  const size_t W = size_t(d.width), H = size_t(d.height), nl = d.num_lights(), nv = d.num_views();
+  std::vector<float> tex(size_t(L.tex_layers) * W * H * 4, 0.f), abrdf(size_t(L.abrdf_layers) * nl * nv * 4, 0.f);
+  for (int i = 0; i < L.nb; ++i) {
+    const FmfBlockView& bl = fv.blocks[size_t(i)];
+    for (size_t t = 0; t < bl.texels; ++t)
+      for (int c = 0; c < bl.C; ++c) tex[((size_t(L.toff[i] + c / 4) * H * W) + t) * 4 + size_t(c % 4)] = bl.SxV[t * size_t(bl.C) + size_t(c)];
+    for (size_t v = 0; v < nv; ++v)
+      for (size_t l = 0; l < nl; ++l)
+        for (int r = 0; r < L.R[i]; ++r) {
+          const size_t row = fv.per_channel ? l + nl * v : size_t(r) + size_t(d.channels) * (l + nl * v);
+          for (int c = 0; c < bl.C; ++c)
+            abrdf[((size_t(L.aoff[i] + r * L.K[i] + c / 4) * nv + v) * nl + l) * 4 + size_t(c % 4)] = bl.U[row * size_t(bl.C) + size_t(c)];
+        }
+  }
+  const TexFormat ff = opt.half ? TexFormat::rgba16f : TexFormat::rgba32f;
+  const double scale = opt.half && !opt.clamp_half ? half_safe_scale(tex) : 1.0;
+  if (scale != 1)
+    for (float& x : tex) x = float(x / scale);
+  ExportBundle b;
+  BTFC_ASSIGN_OR_RETURN(GpuTexture T, make_float_texture("eigen_texture", ff, uint32_t(W), uint32_t(H), uint32_t(L.tex_layers), std::move(tex), true));
+  T.scale = scale;
+  T.meaning = "eigen-textures SxV (V Sigma), 4 components per RGBA texel; value = stored * scale; mip chain = box-filtered BTF";
+  T.channel_meaning = {"component 4j", "component 4j+1", "component 4j+2", "component 4j+3"};
+  BTFC_ASSIGN_OR_RETURN(GpuTexture A, make_float_texture("eigen_abrdf", ff, uint32_t(nl), uint32_t(nv), uint32_t(L.abrdf_layers), std::move(abrdf)));
+  A.meaning = "eigen-ABRDFs U at (x = light, y = view), layer = abrdf_layer_offset + row * layers + j, 4 components per texel";
+  A.channel_meaning = T.channel_meaning;
+  BTFC_ASSIGN_OR_RETURN(auto dm, direction_maps(d, opt.direction_map));
+  b.textures.push_back(std::move(T));
+  b.textures.push_back(std::move(A));
+  b.textures.push_back(std::move(dm.first));
+  b.textures.push_back(std::move(dm.second));
+  nlohmann::json blocks = nlohmann::json::array();
+  for (int i = 0; i < L.nb; ++i)
+    blocks.push_back({{"name", fv.blocks[size_t(i)].name},
+                      {"components", fv.blocks[size_t(i)].C},
+                      {"layers", L.K[i]},
+                      {"rows_per_direction_pair", L.R[i]},
+                      {"texture_layer_offset", L.toff[i]},
+                      {"abrdf_layer_offset", L.aoff[i]}});
+  b.evaluation = {{"color_mode", L.mode},
+                  {"blocks", blocks},
+                  {"formula", "value(b, r) = scale * sum_j dot(eigen_texture[toff_b + j](x, y), eigen_abrdf[aoff_b + r * layers_b + j](light, view))"},
+                  {"color", L.mode == 11 ? "dfmf: Y = exp(value(y)) - 1e-5; U = value(u) (Y + 1e-5); V = value(v) (Y + 1e-5); RGB = M YUV"
+                            : L.mode == 12 ? "rgb: exp(value(0, c)) - 1e-5" : "rgb: value(0, c)"},
+                  {"rgb_from_yuv", {{k_rgb_from_yuv[0][0], k_rgb_from_yuv[0][1], k_rgb_from_yuv[0][2]},
+                                    {k_rgb_from_yuv[1][0], k_rgb_from_yuv[1][1], k_rgb_from_yuv[1][2]},
+                                    {k_rgb_from_yuv[2][0], k_rgb_from_yuv[2][1], k_rgb_from_yuv[2][2]}}},
+                  {"interpolation", "Delaunay in parabolic coordinates p = (x, y) / (1 + z); cell = floor((p / 2 + 1 / 2) n); "
+                                    "sum_ij wl_i wv_j value(il_i, iv_j) over dir_index / dir_weight layers 0 (light), 1 (view)"},
+                  {"direction_map_size", opt.direction_map}};
+  b.desc = d, b.spec = model.spec();
+  b.glsl = shader(b, L);
+  return b;
+}
+
+}  // namespace
+
+extern const Exporter k_fmf_exporter;
+const Exporter k_fmf_exporter = {"fmf", &build, &emulate};
+
+}  // namespace btfc::gpu

@@ -1,0 +1,170 @@
+#include "formats/gpu/export.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/interp.h"
+
+namespace btfc::gpu {
+
+// Codec exporters, one line each (defined in codecs/<codec>/<codec>_export.cpp).
+extern const Exporter k_fmf_exporter;
+
+namespace {
+const Exporter* const k_exporters[] = {&k_fmf_exporter};
+}
+
+const Exporter* find_exporter(const std::string& codec) {
+  for (const Exporter* e : k_exporters)
+    if (codec == e->codec) return e;
+  return nullptr;
+}
+
+const GpuTexture* ExportBundle::find(const std::string& name) const {
+  for (const GpuTexture& t : textures)
+    if (t.name == name) return &t;
+  return nullptr;
+}
+
+uint64_t ExportBundle::clamped() const {
+  uint64_t n = 0;
+  for (const GpuTexture& t : textures) n += t.clamped;
+  return n;
+}
+
+uint64_t ExportBundle::texture_bytes() const {
+  uint64_t n = 0;
+  for (const GpuTexture& t : textures) n += t.total_bytes();
+  return n;
+}
+
+Result<ExportBundle> build_export(const Model& model, const ExportOptions& opt) {
+  const std::string codec = model.spec().substr(0, model.spec().find(':'));
+  const Exporter* e = find_exporter(codec);
+  if (!e) return unsupported("export: codec '" + codec + "' has no GPU exporter");
+  if (opt.direction_map < 2 || opt.direction_map > 1024)
+    return invalid_argument("export: direction map size " + std::to_string(opt.direction_map) + " outside 2..1024");
+  BTFC_ASSIGN_OR_RETURN(ExportBundle b, e->build(model, opt));
+  b.codec = codec, b.spec = model.spec(), b.desc = model.desc(), b.model_payload_bytes = model.payload_bytes();
+  if (const uint64_t c = b.clamped())
+    b.warnings.push_back(std::to_string(c) + " values clamped to the range of their texture format (half: +-65504)");
+  return b;
+}
+
+nlohmann::json direction_table(const DirectionSet& set) {
+  nlohmann::json a = nlohmann::json::array();
+  for (const Vec3& d : set.dirs) a.push_back({d.x, d.y, d.z});
+  return a;
+}
+
+nlohmann::json manifest_json(const ExportBundle& b) {
+  using nlohmann::json;
+  json m;
+  m["format"] = "btfc-export";
+  m["version"] = 1;
+  m["btfc_version"] = BTFC_VERSION;
+  m["codec"] = b.codec;
+  m["spec"] = b.spec;
+  m["btf"] = {{"width", b.desc.width},
+              {"height", b.desc.height},
+              {"channels", b.desc.channels},
+              {"hdr", b.desc.hdr},
+              {"light_set", b.desc.lights.name},
+              {"view_set", b.desc.views.name},
+              {"lights", direction_table(b.desc.lights)},
+              {"views", direction_table(b.desc.views)}};
+  json tex = json::array();
+  for (const GpuTexture& t : b.textures) {
+    const FormatInfo& fi = format_info(t.format);
+    tex.push_back({{"name", t.name},
+                   {"file", t.name + ".ktx2"},
+                   {"sampler", "u_" + t.name},
+                   {"format", fi.name},
+                   {"vk_format", fi.vk_format},
+                   {"gl_internal_format", fi.gl_internal},
+                   {"width", t.width},
+                   {"height", t.height},
+                   {"layers", t.layers},
+                   {"levels", t.num_levels()},
+                   {"filter", t.linear_filter ? "linear" : "nearest"},
+                   {"scale", t.scale},
+                   {"bias", t.bias},
+                   {"meaning", t.meaning},
+                   {"channels", t.channel_meaning},
+                   {"bytes", t.total_bytes()},
+                   {"clamped_values", t.clamped}});
+  }
+  m["textures"] = tex;
+  m["shader"] = {{"file", "btf.frag"},
+                 {"language", "GLSL ES 3.00 (#version 300 es)"},
+                 {"functions", {"vec3 btf_eval(vec2 uv, vec3 wl, vec3 wv)", "vec3 btf_eval_measured(vec2 uv, int light, int view)"}},
+                 {"samplers", "uniform u_<texture name>, texture unit = index in 'textures'"},
+                 {"uv", "texel (x, y) at ((x + 0.5) / width, (y + 0.5) / height); y = BTF image row; nearest texel"},
+                 {"frame", "directions are unit vectors in the sample's tangent frame, z = surface normal"},
+                 {"no_main", "#define BTFC_NO_MAIN after the #version line drops main()"},
+                 {"main", "in vec2 v_uv; in vec3 v_wl, v_wv; out vec4 btf_color = vec4(btf_eval(v_uv, v_wl, v_wv), 1)"}};
+  m["evaluation"] = b.evaluation;
+  m["bytes"] = {{"textures", b.texture_bytes()}, {"model_payload", b.model_payload_bytes}};
+  m["clamped_values"] = b.clamped();
+  m["warnings"] = b.warnings;
+  return m;
+}
+
+void uv_texel(float u, float v, int width, int height, int& x, int& y) {
+  x = std::clamp(int(std::floor(u * float(width))), 0, width - 1);
+  y = std::clamp(int(std::floor(v * float(height))), 0, height - 1);
+}
+
+void direction_cell(const Vec3& d, int n, int& cx, int& cy) {
+  const float s = 1.0f / (1.0f + std::max(d.z, 0.0f));
+  const float px = d.x * s, py = d.y * s;
+  cx = std::clamp(int(std::floor((px * 0.5f + 0.5f) * float(n))), 0, n - 1);
+  cy = std::clamp(int(std::floor((py * 0.5f + 0.5f) * float(n))), 0, n - 1);
+}
+
+const char* glsl_common() {
+  return R"(// ---- btfc common ----
+ivec2 btfc_texel(vec2 uv, ivec2 size) {
+  return clamp(ivec2(floor(uv * vec2(size))), ivec2(0), size - 1);
+}
+// Cell of an n x n parabolic direction map: p = (x, y) / (1 + z), [-1, 1]^2 -> [0, n)^2.
+ivec2 btfc_dir_cell(vec3 d, int n) {
+  vec2 p = d.xy * (1.0 / (1.0 + max(d.z, 0.0)));
+  return clamp(ivec2(floor((p * 0.5 + 0.5) * float(n))), ivec2(0), ivec2(n - 1));
+}
+)";
+}
+
+Result<std::pair<GpuTexture, GpuTexture>> direction_maps(const BtfDesc& desc, int n) {
+  const size_t nn = size_t(n) * size_t(n);
+  std::vector<uint32_t> idx(2 * nn * 4, 0);
+  std::vector<float> w(2 * nn * 4, 0.f);
+  for (int layer = 0; layer < 2; ++layer) {
+    const DirectionSet& set = layer == 0 ? desc.lights : desc.views;
+    if (set.size() > 65535) return unsupported("export: more than 65535 directions do not fit the 16-bit index map");
+    const DirectionInterpolator interp(set);
+    for (int cy = 0; cy < n; ++cy)
+      for (int cx = 0; cx < n; ++cx) {
+        // Texel centre in parabolic coordinates -> direction (outside the disc: the rim).
+        double px = (cx + 0.5) / n * 2 - 1, py = (cy + 0.5) / n * 2 - 1, r2 = px * px + py * py;
+        if (r2 > 1) {
+          const double r = std::sqrt(r2);
+          px /= r, py /= r, r2 = 1;
+        }
+        const double s = 1 / (1 + r2);
+        const Vec3 d{float(2 * px * s), float(2 * py * s), float((1 - r2) * s)};
+        const DirWeights dw = interp.weights(d);
+        const size_t at = ((size_t(layer) * size_t(n) + size_t(cy)) * size_t(n) + size_t(cx)) * 4;
+        for (int k = 0; k < 3; ++k) idx[at + size_t(k)] = uint32_t(dw.index[size_t(k)]), w[at + size_t(k)] = dw.weight[size_t(k)];
+      }
+  }
+  BTFC_ASSIGN_OR_RETURN(GpuTexture ti, make_uint_texture("dir_index", TexFormat::rgba16_uint, uint32_t(n), uint32_t(n), 2, std::move(idx)));
+  BTFC_ASSIGN_OR_RETURN(GpuTexture tw, make_float_texture("dir_weight", TexFormat::rgba32f, uint32_t(n), uint32_t(n), 2, std::move(w)));
+  ti.meaning = "Delaunay triangle of each parabolic-map cell: 3 direction indices (layer 0 lights, 1 views)";
+  ti.channel_meaning = {"index 0", "index 1", "index 2", "unused"};
+  tw.meaning = "barycentric weights of those 3 directions at the cell centre (sum 1)";
+  tw.channel_meaning = {"weight 0", "weight 1", "weight 2", "unused"};
+  return std::make_pair(std::move(ti), std::move(tw));
+}
+
+}  // namespace btfc::gpu
