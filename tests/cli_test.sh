@@ -142,5 +142,17 @@ check render-sphere 0 "$BTFC" render "$W/s.btfc" -o "$W/r.exr" --shape sphere --
 check render-below 1 "$BTFC" render "$W/m.btfc" -o "$W/r2.png" --view 120,0
 [ ! -e "$W/r2.png" ] && echo "ok   render-no-output" || { echo "FAIL render-no-output"; fails=$((fails + 1)); }
 
+# export (fmf here; other codecs' lines follow their exporters)
+check export-fmf 0 "$BTFC" export "$W/m.btfc" --to "$W/exp-fmf"
+for f in manifest.json btf.frag eigen_texture.ktx2 eigen_abrdf.ktx2 dir_index.ktx2 dir_weight.ktx2 previews/eigen_texture.exr previews/dir_index.png; do
+  [ -s "$W/exp-fmf/$f" ] || { echo "FAIL export-fmf-files: $f missing"; fails=$((fails + 1)); }
+done
+check export-json 0 "$BTFC" --json export "$W/m.btfc" --to "$W/exp-fmf2" --float --no-previews --direction-map 32
+expect_grep export-json-format '"format": "rgba32f"' "$W/out.txt"
+check export-not-empty 2 "$BTFC" export "$W/m.btfc" --to "$W/exp-fmf"
+check export-raw 1 "$BTFC" export "$W/s.btfc" --to "$W/exp-raw"
+[ ! -e "$W/exp-raw" ] && [ ! -e "$W/exp-raw.tmp-export" ] && echo "ok   export-no-output" || { echo "FAIL export-no-output"; fails=$((fails + 1)); }
+check export-bad-magic 2 "$BTFC" export "$W/err.txt" --to "$W/exp-bad"
+
 echo "$fails failure(s)"
 [ "$fails" -eq 0 ]
