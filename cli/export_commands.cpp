@@ -14,7 +14,7 @@ namespace btfc::cli {
 namespace {
 
 struct ExportArgs {
-  std::string in, dir, env;
+  std::string in, dir, env, scene, material;
   bool float32 = false, clamp_half = false, no_previews = false;
   int direction_map = 64, sh_order = 5;
 };
@@ -34,6 +34,11 @@ int cmd_export(const Global& g, const ExportArgs& a) {
   opt.half = !a.float32;
   opt.clamp_half = a.clamp_half;
   opt.direction_map = a.direction_map;
+  if (!a.scene.empty()) {
+    auto sc = gpu::read_scene(a.scene, a.material);
+    if (!sc.ok()) return fail(g, sc.status());
+    opt.scene = sc.value();
+  }
   auto bundle = gpu::build_export(m, opt);
   if (!bundle.ok()) return fail(g, bundle.status().with_context(a.in));
   if (Status s = gpu::write_export_dir(bundle.value(), a.dir, !a.no_previews); !s.ok()) return fail(g, s);
@@ -51,6 +56,7 @@ int cmd_export(const Global& g, const ExportArgs& a) {
       std::cout << "  " << t.name << ".ktx2  " << gpu::format_info(t.format).name << " " << t.width << " x " << t.height
                 << (t.layers ? " x " + std::to_string(t.layers) + " layers" : std::string()) << ", " << t.num_levels() << " level(s), "
                 << t.total_bytes() << " bytes" << (t.scale != 1 ? ", scale " + std::to_string(t.scale) : std::string()) << "\n";
+    if (!bundle->scene_report.is_null()) std::cout << "  scene: " << bundle->scene_report.dump() << "\n";
     std::cout << "  manifest.json, btf.frag" << (a.no_previews ? "" : ", previews/") << "; textures " << bundle->texture_bytes()
               << " bytes (model payload " << bundle->model_payload_bytes << ")\n";
   }
@@ -69,6 +75,8 @@ void add_export_commands(CLI::App& app, const Global& g, int& code) {
   ex->add_option("--direction-map", a.direction_map, "size of the parabolic direction index / weight maps")->check(CLI::Range(2, 1024));
   ex->add_option("--env", a.env, "lpca: lat-long EXR environment for the PRT maps (seed 002 section 5.1)");
   ex->add_option("--sh-order", a.sh_order, "lpca: SH order of the environment projection")->check(CLI::Range(1, 12));
+  ex->add_option("--scene", a.scene, "scene.json: footprints, light/view cones, GPU budget; keep only what the scene needs");
+  ex->add_option("--material", a.material, "material of the scene file (default: the first)");
   ex->add_flag("--no-previews", a.no_previews, "skip the EXR / PNG previews");
   ex->callback([&] { code = cmd_export(g, a); });
 }

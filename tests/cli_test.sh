@@ -152,6 +152,15 @@ expect_grep export-json-format '"format": "rgba32f"' "$W/out.txt"
 check export-not-empty 2 "$BTFC" export "$W/m.btfc" --to "$W/exp-fmf"
 check export-raw 1 "$BTFC" export "$W/s.btfc" --to "$W/exp-raw"
 [ ! -e "$W/exp-raw" ] && [ ! -e "$W/exp-raw.tmp-export" ] && echo "ok   export-no-output" || { echo "FAIL export-no-output"; fails=$((fails + 1)); }
+cat >"$W/scene.json" <<'JSON'
+{"materials": [{"name": "floor", "footprint": [2, 8], "view_cone": {"theta": 0, "phi": 0, "angle": 30}, "gpu_budget": "4M"}]}
+JSON
+check export-scene 0 "$BTFC" --json export "$W/m.btfc" --to "$W/exp-scene" --scene "$W/scene.json" --no-previews
+expect_grep export-scene-report '"predicted_added_rel_error"' "$W/out.txt"
+expect_grep export-scene-manifest '"mip_levels"' "$W/exp-scene/manifest.json"
+echo '{"materials": [{"fooprint": [1, 2]}]}' >"$W/bad-scene.json"
+check export-scene-bad 1 "$BTFC" export "$W/m.btfc" --to "$W/exp-scene2" --scene "$W/bad-scene.json"
+expect_grep export-scene-bad-msg "unknown key 'fooprint'" "$W/err.txt"
 check export-bad-magic 2 "$BTFC" export "$W/err.txt" --to "$W/exp-bad"
 
 echo "$fails failure(s)"

@@ -10,6 +10,7 @@
 //   dir_index / dir_weight   parabolic Delaunay maps (layer 0 lights, 1 views).
 // Blocks: color=rgb one block whose rows are (colour r, light, view); color=dfmf blocks y, u, v
 // (rows (light, view)) decoded in the shader as the model does (Ylog, U/Y, V/Y -> RGB).
+#include <algorithm>
 #include <cmath>
 
 #include "codecs/fmf/fmf.h"
@@ -71,7 +72,8 @@ void measured(const ExportBundle& b, const Layout& L, int x, int y, int l, int v
 void emulate(const ExportBundle& b, const ShaderQuery& q, float* rgb) {
   const Layout L = layout_of(b);
   int x, y;
-  uv_texel(q.u, q.v, b.desc.width, b.desc.height, x, y);
+  const GpuTexture& T = *b.find("eigen_texture");
+  uv_texel(q.u, q.v, int(T.width), int(T.height), x, y);
   if (q.light >= 0) return measured(b, L, x, y, q.light, q.view, rgb);
   const GpuTexture& I = *b.find("dir_index");
   const GpuTexture& W = *b.find("dir_weight");
@@ -105,7 +107,8 @@ std::string shader(const ExportBundle& b, const Layout& L) {
                   "uniform highp sampler2DArray u_eigen_texture;\nuniform highp sampler2DArray u_eigen_abrdf;\n"
                   "uniform highp usampler2DArray u_dir_index;\nuniform highp sampler2DArray u_dir_weight;\n";
   s += glsl_common();
-  s += "const ivec2 SIZE = ivec2(" + std::to_string(b.desc.width) + ", " + std::to_string(b.desc.height) + ");\n";
+  const GpuTexture& T = *b.find("eigen_texture");  // level 0 of the export (a scene may drop finer levels)
+  s += "const ivec2 SIZE = ivec2(" + std::to_string(T.width) + ", " + std::to_string(T.height) + ");\n";
   s += "const int DIR_N = " + std::to_string(b.find("dir_index")->width) + ";\n";
   s += "const float TEX_SCALE = " + f(b.find("eigen_texture")->scale) + ";\n";
   s += "float fmf_block(int toff, int aoff, int K, ivec2 xy, ivec2 lv) {\n"
@@ -149,6 +152,13 @@ std::string shader(const ExportBundle& b, const Layout& L) {
   return s;
 }
 
+// Bytes of the textures for `K` eigen-texture / `KA` eigen-ABRDF layers, mip levels m0..m1.
+uint64_t bytes_for(int K, int KA, const BtfDesc& d, int m0, int m1, size_t nl, size_t nv, int bpc, int dir_n) {
+  uint64_t tex = 0;
+  for (int m = m0; m <= m1; ++m) tex += uint64_t(std::max(d.width >> m, 1)) * uint64_t(std::max(d.height >> m, 1));
+  return (tex * uint64_t(K) + uint64_t(nl) * nv * uint64_t(KA)) * 4 * uint64_t(bpc) + uint64_t(dir_n) * uint64_t(dir_n) * 2 * (8 + 16);
+}
+
 Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
   BTFC_ASSIGN_OR_RETURN(FmfFactorsView fv, fmf_factors(model));
   const BtfDesc& d = model.desc();
@@ -157,23 +167,57 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
   if ((fv.per_channel && fv.bonn_color_model != 11) || (!fv.per_channel && L.mode != 0 && L.mode != 12))
     return unsupported("export: fmf colour model " + std::to_string(fv.bonn_color_model) + " has no shader (rgb and dfmf only)");
   L.nb = int(fv.blocks.size());
+
+  // What the scene needs (formats/gpu/scene.h): mip levels, directions, components.
+  int levels = 1;
+  while ((d.width >> levels) > 0 || (d.height >> levels) > 0) ++levels;
+  int m0 = 0, m1 = levels - 1;
+  std::vector<int> ls, vs;
+  for (size_t i = 0; i < d.num_lights(); ++i) ls.push_back(int(i));
+  for (size_t i = 0; i < d.num_views(); ++i) vs.push_back(int(i));
+  if (opt.scene) {
+    scene_mip_range(*opt.scene, m0, m1);
+    m0 = std::min(m0, levels - 1), m1 = std::clamp(m1, m0, levels - 1);
+    ls = directions_in_cone(d.lights, opt.scene->light_cone);
+    vs = directions_in_cone(d.views, opt.scene->view_cone);
+  }
+  int C[3] = {0, 0, 0};
+  for (int i = 0; i < L.nb; ++i) C[i] = fv.blocks[size_t(i)].C;
+  const int bpc = opt.half ? 2 : 4;
+  auto layers_for = [&](int q, int* Cq) {  // q eigen-texture layers for block 0, the others in proportion
+    int K = 0, KA = 0;
+    const int k0 = std::max(1, (C[0] + 3) / 4);
+    for (int i = 0; i < L.nb; ++i) {
+      const int ki = std::max(1, (C[i] + 3) / 4), kq = std::max(1, (q * ki + k0 - 1) / k0);
+      Cq[i] = std::min(C[i], 4 * kq);
+      K += kq, KA += kq * (fv.per_channel ? 1 : d.channels);
+    }
+    return bytes_for(K, KA, d, m0, m1, ls.size(), vs.size(), bpc, opt.direction_map);
+  };
+  int Ck[3];
+  int q = std::max(1, (C[0] + 3) / 4);
+  uint64_t need = layers_for(q, Ck);
+  if (opt.scene && opt.scene->gpu_budget)
+    while (need > opt.scene->gpu_budget && q > 1) need = layers_for(--q, Ck);
+
   for (int i = 0; i < L.nb; ++i) {
-    L.K[i] = std::max(1, (fv.blocks[size_t(i)].C + 3) / 4);
+    L.K[i] = std::max(1, (Ck[i] + 3) / 4);
     L.R[i] = fv.per_channel ? 1 : d.channels;
     L.toff[i] = L.tex_layers, L.aoff[i] = L.abrdf_layers;
     L.tex_layers += L.K[i], L.abrdf_layers += L.K[i] * L.R[i];
   }
-  const size_t W = size_t(d.width), H = size_t(d.height), nl = d.num_lights(), nv = d.num_views();
+  const size_t W = size_t(d.width), H = size_t(d.height), nl = ls.size(), nv = vs.size();
   std::vector<float> tex(size_t(L.tex_layers) * W * H * 4, 0.f), abrdf(size_t(L.abrdf_layers) * nl * nv * 4, 0.f);
   for (int i = 0; i < L.nb; ++i) {
     const FmfBlockView& bl = fv.blocks[size_t(i)];
     for (size_t t = 0; t < bl.texels; ++t)
-      for (int c = 0; c < bl.C; ++c) tex[((size_t(L.toff[i] + c / 4) * H * W) + t) * 4 + size_t(c % 4)] = bl.SxV[t * size_t(bl.C) + size_t(c)];
+      for (int c = 0; c < Ck[i]; ++c) tex[((size_t(L.toff[i] + c / 4) * H * W) + t) * 4 + size_t(c % 4)] = bl.SxV[t * size_t(bl.C) + size_t(c)];
     for (size_t v = 0; v < nv; ++v)
       for (size_t l = 0; l < nl; ++l)
         for (int r = 0; r < L.R[i]; ++r) {
-          const size_t row = fv.per_channel ? l + nl * v : size_t(r) + size_t(d.channels) * (l + nl * v);
-          for (int c = 0; c < bl.C; ++c)
+          const size_t ol = size_t(ls[l]), ov = size_t(vs[v]);
+          const size_t row = fv.per_channel ? ol + d.num_lights() * ov : size_t(r) + size_t(d.channels) * (ol + d.num_lights() * ov);
+          for (int c = 0; c < Ck[i]; ++c)
             abrdf[((size_t(L.aoff[i] + r * L.K[i] + c / 4) * nv + v) * nl + l) * 4 + size_t(c % 4)] = bl.U[row * size_t(bl.C) + size_t(c)];
         }
   }
@@ -183,13 +227,22 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
     for (float& x : tex) x = float(x / scale);
   ExportBundle b;
   BTFC_ASSIGN_OR_RETURN(GpuTexture T, make_float_texture("eigen_texture", ff, uint32_t(W), uint32_t(H), uint32_t(L.tex_layers), std::move(tex), true));
+  if (m0 > 0 || m1 < int(T.num_levels()) - 1) {  // the scene samples only levels m0..m1
+    T.f.resize(size_t(m1) + 1);
+    T.f.erase(T.f.begin(), T.f.begin() + m0);
+    T.width = std::max<uint32_t>(T.width >> m0, 1), T.height = std::max<uint32_t>(T.height >> m0, 1);
+  }
   T.scale = scale;
   T.meaning = "eigen-textures SxV (V Sigma), 4 components per RGBA texel; value = stored * scale; mip chain = box-filtered BTF";
   T.channel_meaning = {"component 4j", "component 4j+1", "component 4j+2", "component 4j+3"};
   BTFC_ASSIGN_OR_RETURN(GpuTexture A, make_float_texture("eigen_abrdf", ff, uint32_t(nl), uint32_t(nv), uint32_t(L.abrdf_layers), std::move(abrdf)));
   A.meaning = "eigen-ABRDFs U at (x = light, y = view), layer = abrdf_layer_offset + row * layers + j, 4 components per texel";
   A.channel_meaning = T.channel_meaning;
-  BTFC_ASSIGN_OR_RETURN(auto dm, direction_maps(d, opt.direction_map));
+  BtfDesc dsub = d;  // the kept direction subsets, for the Delaunay maps
+  dsub.lights.dirs.clear(), dsub.views.dirs.clear();
+  for (int l : ls) dsub.lights.dirs.push_back(d.lights.dirs[size_t(l)]);
+  for (int v : vs) dsub.views.dirs.push_back(d.views.dirs[size_t(v)]);
+  BTFC_ASSIGN_OR_RETURN(auto dm, direction_maps(dsub, opt.direction_map));
   b.textures.push_back(std::move(T));
   b.textures.push_back(std::move(A));
   b.textures.push_back(std::move(dm.first));
@@ -197,7 +250,7 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
   nlohmann::json blocks = nlohmann::json::array();
   for (int i = 0; i < L.nb; ++i)
     blocks.push_back({{"name", fv.blocks[size_t(i)].name},
-                      {"components", fv.blocks[size_t(i)].C},
+                      {"components", Ck[i]},
                       {"layers", L.K[i]},
                       {"rows_per_direction_pair", L.R[i]},
                       {"texture_layer_offset", L.toff[i]},
@@ -212,7 +265,34 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
                                     {k_rgb_from_yuv[2][0], k_rgb_from_yuv[2][1], k_rgb_from_yuv[2][2]}}},
                   {"interpolation", "Delaunay in parabolic coordinates p = (x, y) / (1 + z); cell = floor((p / 2 + 1 / 2) n); "
                                     "sum_ij wl_i wv_j value(il_i, iv_j) over dir_index / dir_weight layers 0 (light), 1 (view)"},
-                  {"direction_map_size", opt.direction_map}};
+                  {"direction_map_size", opt.direction_map},
+                  {"light_indices", ls},
+                  {"view_indices", vs},
+                  {"first_mip_level", m0}};
+  if (opt.scene) {
+    // Eckart-Young: the dropped components' share of the model's energy is the added relative L2.
+    nlohmann::json err = nlohmann::json::object();
+    double worst = 0;
+    for (int i = 0; i < L.nb; ++i) {
+      double all = 0, dropped = 0;
+      for (int c = 0; c < C[i]; ++c) {
+        const double s2 = double(fv.blocks[size_t(i)].S[c]) * fv.blocks[size_t(i)].S[c];
+        all += s2, dropped += c >= Ck[i] ? s2 : 0;
+      }
+      const double e = all > 0 ? std::sqrt(dropped / all) : 0;
+      err[fv.blocks[size_t(i)].name] = e;
+      worst = std::max(worst, e);
+    }
+    b.scene_report = {{"mip_levels", {m0, m1}},
+                      {"texture_size", {b.textures[0].width, b.textures[0].height}},
+                      {"lights_kept", ls.size()},
+                      {"views_kept", vs.size()},
+                      {"components_kept", std::vector<int>(Ck, Ck + L.nb)},
+                      {"components_model", std::vector<int>(C, C + L.nb)},
+                      {"predicted_added_rel_error_per_block", err},
+                      {"predicted_added_rel_error", worst},
+                      {"predicted_bytes", need}};
+  }
   b.desc = d, b.spec = model.spec();
   b.glsl = shader(b, L);
   return b;

@@ -46,6 +46,17 @@ Result<ExportBundle> build_export(const Model& model, const ExportOptions& opt) 
     return invalid_argument("export: direction map size " + std::to_string(opt.direction_map) + " outside 2..1024");
   BTFC_ASSIGN_OR_RETURN(ExportBundle b, e->build(model, opt));
   b.codec = codec, b.spec = model.spec(), b.desc = model.desc(), b.model_payload_bytes = model.payload_bytes();
+  if (opt.scene) {
+    const uint64_t bytes = b.texture_bytes(), budget = opt.scene->gpu_budget;
+    if (b.scene_report.is_null())  // the codec keeps everything: only the budget applies
+      b.scene_report = {{"kept", "everything (this codec's exporter does not cut by scene)"}, {"predicted_added_rel_error", 0.0}};
+    b.scene_report["material"] = opt.scene->name;
+    b.scene_report["bytes"] = bytes;
+    b.scene_report["gpu_budget"] = budget;
+    if (budget && bytes > budget)
+      return invalid_argument("export: the textures need " + std::to_string(bytes) + " bytes, over the scene's GPU budget of " +
+                              std::to_string(budget) + " bytes");
+  }
   if (const uint64_t c = b.clamped())
     b.warnings.push_back(std::to_string(c) + " values clamped to the range of their texture format (half: +-65504)");
   return b;
@@ -107,6 +118,7 @@ nlohmann::json manifest_json(const ExportBundle& b) {
   m["bytes"] = {{"textures", b.texture_bytes()}, {"model_payload", b.model_payload_bytes}};
   m["clamped_values"] = b.clamped();
   m["warnings"] = b.warnings;
+  if (!b.scene_report.is_null()) m["scene"] = b.scene_report;
   return m;
 }
 

@@ -30,6 +30,7 @@
 
 #include "codecs/codec.h"
 #include "formats/gpu/gpu_texture.h"
+#include "formats/gpu/scene.h"
 
 namespace btfc::gpu {
 
@@ -42,6 +43,8 @@ struct ExportOptions {
   bool clamp_half = false;
   // Resolution of the parabolic direction maps (Delaunay index / barycentric weight textures).
   int direction_map = 64;
+  // Keep only what this scene needs (formats/gpu/scene.h); the bundle's `scene_report` says what.
+  std::optional<SceneMaterial> scene;
 };
 
 struct ExportBundle {
@@ -52,6 +55,7 @@ struct ExportBundle {
   std::string glsl;            // the reference fragment shader
   std::vector<std::string> warnings;
   uint64_t model_payload_bytes = 0;
+  nlohmann::json scene_report;  // null without a scene (manifest "scene")
 
   const GpuTexture* find(const std::string& name) const;
   uint64_t clamped() const;
