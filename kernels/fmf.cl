@@ -31,9 +31,22 @@ inline float3 fmf_undecorrelate(float ylog, float u, float v) {
 inline float3 fmf_value(__global const float* U, __global const float* SxV, int C, int nL, int rows_per_block,
                         int texels, int mode, int texel, int l, int v) {
   if (mode == BTFC_FMF_RGB) {
+    /* The texel's row is loaded once for the three colour rows (three independent 8-lane sums,
+       same order as fmf_dot, so results equal the reference's). */
     __global const float* sx = SxV + (size_t)texel * C;
     __global const float* u = U + (size_t)(3 * (l + nL * v)) * C;
-    return (float3)(fmf_dot(u, sx, C), fmf_dot(u + C, sx, C), fmf_dot(u + 2 * C, sx, C));
+    float8 a0 = (float8)(0.0f), a1 = a0, a2 = a0;
+    int k = 0;
+    for (; k + 8 <= C; k += 8) {
+      float8 s8 = vload8(0, sx + k);
+      a0 = mad(vload8(0, u + k), s8, a0);
+      a1 = mad(vload8(0, u + C + k), s8, a1);
+      a2 = mad(vload8(0, u + 2 * C + k), s8, a2);
+    }
+    float4 h0 = a0.lo + a0.hi, h1 = a1.lo + a1.hi, h2 = a2.lo + a2.hi;
+    float3 r = (float3)((h0.x + h0.y) + (h0.z + h0.w), (h1.x + h1.y) + (h1.z + h1.w), (h2.x + h2.y) + (h2.z + h2.w));
+    for (; k < C; ++k) r = mad((float3)(u[k], u[C + k], u[2 * C + k]), (float3)(sx[k]), r);
+    return r;
   }
   size_t r = (size_t)(l + nL * v) * C, t = (size_t)texel * C;
   size_t ub = (size_t)rows_per_block * C, sb = (size_t)texels * C;
