@@ -1,9 +1,9 @@
-// Tests of the lpyr and lpca GPU exporters (codecs/<codec>/<codec>_export.cpp): the CPU
-// emulation of each shader, reading only the exported texture values, against the model's own
-// evaluation (measured directions, Delaunay-interpolated directions at direction-map cell
-// centres, levels of detail, the paper's nearest-direction renderer, PRT relighting), with the
-// half-float error two-sided where storage is lossy; KTX2 round trips; GLSL ES 3.00 syntax
-// through glslangValidator when it is installed.
+// Tests of the lpyr GPU exporter (codecs/lpyr/lpyr_export.cpp) and of what every codec exporter
+// shares: the CPU emulation of the shader, reading only the exported texture values, against the
+// model's own evaluation (measured directions, Delaunay-interpolated directions at direction-map
+// cell centres, levels of detail, the paper's nearest-direction renderer), with the half-float
+// error two-sided; HDR scaling / clamping; KTX2 round trips; GLSL ES 3.00 syntax through
+// glslangValidator when it is installed. lpca: export_lpca_test.cpp.
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -14,81 +14,17 @@
 #include <random>
 
 #include "codecs/lpca/lpca.h"
-#include "codecs/lpca/lpca_export.h"
-#include "codecs/lpca/lpca_model.h"
 #include "codecs/lpyr/lpyr.h"
 #include "codecs/lpyr/lpyr_export.h"
 #include "codecs/lpyr/lpyr_internal.h"
-#include "core/synth.h"
 #include "formats/gpu/ktx2.h"
+#include "tests/export_test_util.h"
 
 using namespace btfc;
 using namespace btfc::gpu;
+using namespace btfc::export_test;
 
 namespace {
-
-constexpr double k_half_rel = 1.0 / 2048;  // half rounding, normal numbers: |x - h(x)| <= 2^-11 |x|
-constexpr double k_half_abs = 1.0 / 33554432;  // subnormal halves: 2^-25 absolute
-
-DirectionSet some_views() {
-  DirectionSet all = DirectionSet::ubo2003(), s;
-  for (int i : {0, 7, 14, 22, 31, 45, 60, 75}) s.dirs.push_back(all.dirs[size_t(i)]);
-  s.name = "custom";
-  return s;
-}
-
-Btf synth(int w, int h) {
-  SynthOptions o;
-  o.width = w, o.height = h, o.views = some_views();
-  return synthesize_btf(o).value();
-}
-
-std::unique_ptr<Model> encode(const Codec& codec, const Btf& b, const std::string& spec) {
-  auto s = parse_spec_string(spec);
-  EXPECT_TRUE(s.ok());
-  auto p = bind_params(*s, codec.params());
-  EXPECT_TRUE(p.ok()) << p.status().message();
-  Context ctx;
-  auto m = codec.encode(b, *p, ctx);
-  EXPECT_TRUE(m.ok()) << m.status().message();
-  return m.ok() ? std::move(m).value() : nullptr;
-}
-
-ExportBundle bundle(const Model& m, bool half, int dir_n = 32) {
-  ExportOptions o;
-  o.half = half, o.direction_map = dir_n;
-  auto b = build_export(m, o);
-  EXPECT_TRUE(b.ok()) << b.status().message();
-  return b.ok() ? std::move(b).value() : ExportBundle{};
-}
-
-ShaderQuery at_texel(const BtfDesc& d, int x, int y) {
-  ShaderQuery q;
-  q.u = (float(x) + 0.5f) / float(d.width), q.v = (float(y) + 0.5f) / float(d.height);
-  return q;
-}
-
-// The direction of a parabolic map cell's centre (as direction_maps and the LUT compute it);
-// false for cells whose centre lies outside the unit disc (they hold the rim's value).
-bool cell_centre(int cx, int cy, int n, Vec3& d) {
-  const double px = (cx + 0.5) / n * 2 - 1, py = (cy + 0.5) / n * 2 - 1, r2 = px * px + py * py;
-  if (r2 >= 1) return false;
-  const double s = 1 / (1 + r2);
-  d = {float(2 * px * s), float(2 * py * s), float((1 - r2) * s)};
-  return true;
-}
-
-std::vector<Vec3> random_cell_centres(int n, int count, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_int_distribution<int> u(0, n - 1);
-  std::vector<Vec3> out;
-  Vec3 d;
-  while (int(out.size()) < count)
-    if (cell_centre(u(rng), u(rng), n, d) && d.z > 0.2f) out.push_back(d);
-  return out;
-}
-
-double float_tol(const float* ref) { return 2e-6 * (1 + std::abs(ref[0]) + std::abs(ref[1]) + std::abs(ref[2])); }
 
 // ---- lpyr ----
 
@@ -119,11 +55,6 @@ double lpyr_half_bound(const ExportBundle& f, int x, int y, int l, int v) {
   }
   return rgb;
 }
-
-struct Errors {
-  double max_err = 0, max_ratio = 0;
-  bool within = true;
-};
 
 TEST(LpyrExport, MeasuredDirectionsMatchModelHalfTwoSidedFloatExact) {
   for (auto [w, h] : {std::pair{13, 9}, std::pair{5, 3}}) {
@@ -246,120 +177,6 @@ TEST(LpyrExport, UnsupportedLayoutSaysWhy) {
   ASSERT_FALSE(b.ok());
   EXPECT_EQ(b.status().code(), StatusCode::unsupported);
   EXPECT_NE(b.status().message().find("at most 8 Y"), std::string::npos) << b.status().message();
-}
-
-// ---- lpca ----
-
-// Worst-case error of a half export of a float-precision model at measured (l, v).
-double lpca_half_bound(const lpca::LpcaModel& m, int x, int y, int l, int v, int ch) {
-  const size_t t = size_t(x) + size_t(m.desc().width) * size_t(y);
-  const int c = m.components();
-  const Eigen::Index r0 = Eigen::Index(m.cluster_of()[t]) * (c + 1), col = Eigen::Index(m.desc().row(size_t(l), size_t(v), size_t(ch)));
-  double b = std::abs(m.table()(r0, col)) * k_half_rel + k_half_abs * m.table().row(r0).cwiseAbs().maxCoeff();
-  for (int i = 0; i < c; ++i) {
-    const double w = m.weights()(Eigen::Index(t), i), e = m.table()(r0 + 1 + i, col);
-    b += std::abs(w * e) * 2.01 * k_half_rel + k_half_abs * (std::abs(e) + std::abs(w));
-  }
-  return b;
-}
-
-TEST(LpcaExport, MeasuredAndInterpolatedMatchModel) {
-  Btf btf = synth(13, 9);
-  for (const char* spec : {"lpca:clusters=3:components=5", "lpca:clusters=4:components=3:precision=float"}) {
-    auto m = encode(lpca_codec(), btf, spec);
-    ASSERT_TRUE(m);
-    const auto& lm = dynamic_cast<const lpca::LpcaModel&>(*m);
-    const bool half_model = lm.config().half;
-    const ExportBundle bh = bundle(*m, true), bf = bundle(*m, false);
-    const BtfDesc& d = m->desc();
-    Errors eh, ef;
-    for (int y = 0; y < d.height; ++y)
-      for (int x = 0; x < d.width; ++x)
-        for (int l = 0; l < int(d.num_lights()); l += 3)
-          for (int v = 0; v < int(d.num_views()); ++v) {
-            ShaderQuery q = at_texel(d, x, y);
-            q.light = l, q.view = v;
-            float ref[3], gh[3], gf[3];
-            m->eval(x, y, l, v, ref);
-            find_exporter("lpca")->emulate(bh, q, gh);
-            find_exporter("lpca")->emulate(bf, q, gf);
-            for (int c = 0; c < 3; ++c) {
-              // A half-precision model's values are stored exactly (its own scales): float tolerance.
-              const double bound = (half_model ? 0 : lpca_half_bound(lm, x, y, l, v, c)) + float_tol(ref);
-              const double e1 = std::abs(gh[c] - ref[c]), e2 = std::abs(gf[c] - ref[c]);
-              eh.max_err = std::max(eh.max_err, e1), eh.max_ratio = std::max(eh.max_ratio, e1 / bound), eh.within &= e1 <= bound;
-              ef.max_err = std::max(ef.max_err, e2), ef.within &= e2 <= float_tol(ref);
-            }
-          }
-    std::printf("lpca %s: half export max |err| %.3g (max err/bound %.3f), float export max |err| %.3g\n", spec, eh.max_err, eh.max_ratio, ef.max_err);
-    EXPECT_TRUE(eh.within) << spec;
-    EXPECT_TRUE(ef.within) << spec;
-    if (!half_model) {
-      EXPECT_GT(eh.max_ratio, 0.1) << spec;  // float values rounded to half: the loss shows
-    }
-    // Arbitrary directions at direction-map cell centres: the model's Delaunay eval_dir.
-    const std::vector<Vec3> dl = random_cell_centres(32, 10, 4), dv = random_cell_centres(32, 10, 5);
-    for (int y = 0; y < d.height; y += 2)
-      for (int x = 0; x < d.width; x += 2)
-        for (size_t i = 0; i < dl.size(); ++i) {
-          ShaderQuery q = at_texel(d, x, y);
-          q.wl = dl[i], q.wv = dv[(i * 3) % dv.size()];
-          float ref[3], g[3];
-          ASSERT_TRUE(m->eval_dir(x, y, q.wl, q.wv, ref).ok());
-          find_exporter("lpca")->emulate(bf, q, g);
-          for (int c = 0; c < 3; ++c) EXPECT_LE(std::abs(g[c] - ref[c]), float_tol(ref)) << spec;
-        }
-  }
-}
-
-double env_value(double x, double y, double z, int c) {
-  const double dot = x * 0.48 + y * 0.3 + z * 0.82;
-  return 0.3 + 0.1 * c + 0.2 * z + (1.0 - 0.3 * c) * std::exp(3.0 * (dot - 1.0));
-}
-
-TEST(LpcaExport, RelitMatchesModelRelightingAtPrtTexelCentres) {
-  Btf btf = synth(11, 7);
-  auto m = encode(lpca_codec(), btf, "lpca:clusters=3:components=5");
-  ASSERT_TRUE(m);
-  EXPECT_EQ(bundle(*m, true).find("prt"), nullptr);
-  EXPECT_EQ(bundle(*m, true).glsl.find("btf_relit"), std::string::npos);
-  EnvironmentSH env;
-  env.order = 5;
-  for (int c = 0; c < 3; ++c) {
-    auto p = sh::project_function(5, [c](double x, double y, double z) { return env_value(x, y, z, c); }, 100);
-    env.coeffs.insert(env.coeffs.end(), p.begin(), p.end());
-  }
-  ASSERT_TRUE(attach_environment(*m, env).ok());
-  const ExportBundle b = bundle(*m, true);
-  ASSERT_NE(b.find("prt"), nullptr);
-  EXPECT_NE(b.glsl.find("vec3 btf_relit(vec2 uv, vec3 wv)"), std::string::npos);
-  const auto& lm = dynamic_cast<const lpca::LpcaModel&>(*m);
-  const float s0 = b.evaluation["prt_scale"][0], s1 = b.evaluation["prt_scale"][1];
-  const BtfDesc& d = m->desc();
-  double max_err = 0, max_ratio = 0;
-  for (int cy = 1; cy < 16; cy += 3)
-    for (int cx = 1; cx < 16; cx += 3) {
-      Vec3 wv;
-      if (!cell_centre(cx, cy, 16, wv) || wv.z < 0.15f) continue;
-      int w, h;
-      auto r = relight(*m, env, wv, w, h);
-      ASSERT_TRUE(r.ok()) << r.status().message();
-      for (int y = 0; y < d.height; ++y)
-        for (int x = 0; x < d.width; ++x) {
-          const size_t t = size_t(y) * size_t(d.width) + size_t(x);
-          double bound = 0.5 / 127.5 * s0 + 1e-6;  // 8-bit rounding of every lambda
-          for (int i = 0; i < lm.components(); ++i) bound += 0.5 / 127.5 * s1 * std::abs(lm.weights()(Eigen::Index(t), i));
-          float g[3];
-          lpca_emulate_relit(b, (float(x) + 0.5f) / float(d.width), (float(y) + 0.5f) / float(d.height), wv, g);
-          for (int c = 0; c < 3; ++c) {
-            const double e = std::abs(g[c] - (*r)[t * 3 + size_t(c)]);
-            max_err = std::max(max_err, e), max_ratio = std::max(max_ratio, e / bound);
-            EXPECT_LE(e, bound) << "cell " << cx << "," << cy << " texel " << x << "," << y;
-          }
-        }
-    }
-  std::printf("lpca btf_relit vs relight at PRT texel centres: max |err| %.3g, max err/bound %.3f\n", max_err, max_ratio);
-  EXPECT_GT(max_ratio, 0.25);  // the 8-bit storage shows: the bound is not loose by orders
 }
 
 // ---- both ----

@@ -325,6 +325,9 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
       {"sh", "relighting under an SH environment a (sample frame, order sh_order, seed 002 eq. 2): L(x, v) = sum_{m=0..C} beta_m "
              "<e^v_{m,k}, a>, beta_0 = cluster_scale(0, k).r (row 0 is stored / mean scale), beta_m = w_{m-1}; views between the "
              "measured ones by Delaunay weights (dir_index layer 1)"},
+      {"storage", "means and weights divided by cluster_scale, eigen-BRDFs orthonormal: every stored value is within [-1, 1] (no half "
+                  "overflow); rgba16f is exact for a half-precision model (cluster_scale = its storage scales), else rounded (relative "
+                  "2^-11); eigen_sh is rounded; rgba32f: exact to float rounding; prt: 8 bits as the model quantizes it"},
       {"direction_map_size", opt.direction_map}};
   if (L.prt) {
     b.evaluation["prt_scale"] = {L.prt_scale[0], L.prt_scale[1]};

@@ -350,6 +350,8 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
                         "(cell = floor((p / 2 + 1 / 2) n), p = (x, y) / (1 + z))"},
       {"nearest_renderer", "btf_eval_nearest_lod (seed 001 section 3.4): (l, v) = direction_lut at the cells of wl, wv (n = lut_size); "
                            "top-level mean = Phong at the actual (wl, wv) when top_mean = phong, else mean_map"},
+      {"storage", "rgba16f: a half-precision model's eigen map and weights are stored exactly (weights divided by the model's own "
+                  "per-component scales), the means are rounded to half (relative 2^-11); rgba32f: exact to float rounding"},
       {"lut_size", L.lut_n}, {"direction_map_size", opt.direction_map}};
   b.desc = d, b.spec = model.spec();
   b.glsl = shader(b, L);
