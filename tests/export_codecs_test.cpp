@@ -255,15 +255,19 @@ TEST(CodecExport, GlslCompilesWithGlslangValidator) {
   if (std::system("command -v glslangValidator > /dev/null 2>&1") != 0) GTEST_SKIP() << "glslangValidator not installed";
   int n = 0;
   for (const ExportBundle& b : all_bundles()) {
-    const std::string path = ::testing::TempDir() + "/btfc_" + b.codec + std::to_string(n++) + "_" + std::to_string(::getpid()) + ".frag";
-    std::ofstream(path) << b.glsl;
-    const std::string cmd = "glslangValidator -S frag " + path + " > " + path + ".log 2>&1";
-    const int rc = std::system(cmd.c_str());
-    std::ifstream log(path + ".log");
-    const std::string text((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
-    EXPECT_EQ(rc, 0) << b.codec << ":\n" << text << "\n" << b.glsl;
-    std::remove(path.c_str());
-    std::remove((path + ".log").c_str());
+    EXPECT_EQ(b.glsl.rfind("#version 300 es\n", 0), 0u) << b.codec;
+    // As written (with main) and as a harness includes it (BTFC_NO_MAIN after the #version line).
+    const size_t eol = b.glsl.find('\n') + 1;
+    for (const std::string& src : {b.glsl, b.glsl.substr(0, eol) + "#define BTFC_NO_MAIN\n" + b.glsl.substr(eol)}) {
+      const std::string path = ::testing::TempDir() + "/btfc_" + b.codec + std::to_string(n++) + "_" + std::to_string(::getpid()) + ".frag";
+      std::ofstream(path) << src;
+      const int rc = std::system(("glslangValidator -S frag " + path + " > " + path + ".log 2>&1").c_str());
+      std::ifstream log(path + ".log");
+      const std::string text((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
+      EXPECT_EQ(rc, 0) << b.codec << ":\n" << text << "\n" << src;
+      std::remove(path.c_str());
+      std::remove((path + ".log").c_str());
+    }
   }
 }
 
