@@ -162,6 +162,14 @@ echo '{"materials": [{"fooprint": [1, 2]}]}' >"$W/bad-scene.json"
 check export-scene-bad 1 "$BTFC" export "$W/m.btfc" --to "$W/exp-scene2" --scene "$W/bad-scene.json"
 expect_grep export-scene-bad-msg "unknown key 'fooprint'" "$W/err.txt"
 check export-bad-magic 2 "$BTFC" export "$W/err.txt" --to "$W/exp-bad"
+# GPU export: lpyr (seed 001 section 3.3 maps) and lpca with PRT maps under an environment (any EXR as lat-long)
+check export-lpyr 0 "$BTFC" export "$W/l.btfc" --to "$W/exp-lpyr"
+[ -f "$W/exp-lpyr/weight_map.ktx2" ] && [ -f "$W/exp-lpyr/direction_lut.ktx2" ] && grep -q "vec3 btf_eval_nearest_lod" "$W/exp-lpyr/btf.frag" && echo "ok   export-lpyr-files" || { echo "FAIL export-lpyr-files"; ls "$W/exp-lpyr"; fails=$((fails + 1)); }
+check lpca-compress 0 "$BTFC" compress "$W/s.btfc" -c lpca:clusters=2:components=3 -o "$W/c.btfc"
+check export-lpca-env 0 "$BTFC" --json export "$W/c.btfc" --to "$W/exp-lpca" --env "$W/r.exr" --sh-order 3
+python3 -c "import json,sys; m=json.load(open(sys.argv[1])); n=[t['name'] for t in m['textures']]; assert 'prt' in n and 'eigen_sh' in n and len(m['evaluation']['prt_scale'])==2, n; print('ok   export-lpca-prt', n)" "$W/exp-lpca/manifest.json" || fails=$((fails + 1))
+check export-lpyr-env 1 "$BTFC" export "$W/l.btfc" --to "$W/exp-bad" --env "$W/r.exr"
+[ ! -e "$W/exp-bad" ] && echo "ok   export-no-output" || { echo "FAIL export-no-output"; fails=$((fails + 1)); }
 
 echo "$fails failure(s)"
 [ "$fails" -eq 0 ]

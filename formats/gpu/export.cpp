@@ -9,9 +9,11 @@ namespace btfc::gpu {
 
 // Codec exporters, one line each (defined in codecs/<codec>/<codec>_export.cpp).
 extern const Exporter k_fmf_exporter;
+extern const Exporter k_lpyr_exporter;
+extern const Exporter k_lpca_exporter;
 
 namespace {
-const Exporter* const k_exporters[] = {&k_fmf_exporter};
+const Exporter* const k_exporters[] = {&k_fmf_exporter, &k_lpyr_exporter, &k_lpca_exporter};
 }
 
 const Exporter* find_exporter(const std::string& codec) {
@@ -57,6 +59,12 @@ Result<ExportBundle> build_export(const Model& model, const ExportOptions& opt) 
       return invalid_argument("export: the textures need " + std::to_string(bytes) + " bytes, over the scene's GPU budget of " +
                               std::to_string(budget) + " bytes");
   }
+  // OpenGL ES 3.0 guarantees only 2048 texels per side and 256 array layers (desktop GPUs and
+  // llvmpipe allow 16384 / 2048): larger textures load on most, but not every, GLES device.
+  for (const GpuTexture& t : b.textures)
+    if (t.width > 2048 || t.height > 2048 || t.layers > 256)
+      b.warnings.push_back("texture '" + t.name + "' (" + std::to_string(t.width) + " x " + std::to_string(t.height) + " x " +
+                           std::to_string(t.num_layers()) + ") exceeds the OpenGL ES 3.0 minimum limits (2048 per side, 256 layers)");
   if (const uint64_t c = b.clamped())
     b.warnings.push_back(std::to_string(c) + " values clamped to the range of their texture format (half: +-65504)");
   return b;
