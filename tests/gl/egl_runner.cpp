@@ -178,6 +178,14 @@ Status upload(GlObjects& o, const ManifestTexture& mt, int unit, bool float_line
   const gpu::GpuTexture& t = mt.tex;
   const gpu::FormatInfo& fi = gpu::format_info(t.format);
   const GLenum target = t.layers ? GL_TEXTURE_2D_ARRAY : GL_TEXTURE_2D;
+  // Beyond the implementation's limits GL fails the upload with a bare GL_INVALID_VALUE; say which.
+  GLint max_size = 0, max_layers = 0;
+  glGetIntegerv(GL_MAX_TEXTURE_SIZE, &max_size);
+  glGetIntegerv(GL_MAX_ARRAY_TEXTURE_LAYERS, &max_layers);
+  if (t.width > uint32_t(max_size) || t.height > uint32_t(max_size) || t.layers > uint32_t(max_layers))
+    return unsupported(mt.file + ": " + std::to_string(t.width) + "x" + std::to_string(t.height) + "x" + std::to_string(t.layers) +
+                       " exceeds GL_MAX_TEXTURE_SIZE " + std::to_string(max_size) + " / GL_MAX_ARRAY_TEXTURE_LAYERS " +
+                       std::to_string(max_layers) + " of this GL (GLES 3.0 guarantees 2048 / 256)");
   GLuint id = 0;
   glGenTextures(1, &id);
   o.textures.push_back(id);
