@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs the Debian packages btfc needs. Idempotent: does nothing when all are present.
 # Package list: ../shared/spec/toolchain.md section 1 (+ nlohmann-json, scikit-image for the
-# SSIM reference script, GoogleTest / Google Benchmark).
+# SSIM reference script, GoogleTest / Google Benchmark; headless EGL + GLES on Mesa's llvmpipe and
+# glslang for the export checks, toolchain.md section 7).
 set -euo pipefail
 PACKAGES=(
   build-essential cmake
@@ -11,6 +12,7 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   python3-numpy python3-skimage python3-matplotlib
   libopenmpi-dev openmpi-bin
+  libegl-mesa0 libgl1-mesa-dri libegl-dev libgles-dev glslang-tools
 )
 missing=()
 for p in "${PACKAGES[@]}"; do
