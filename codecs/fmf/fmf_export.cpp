@@ -233,7 +233,10 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
     T.width = std::max<uint32_t>(T.width >> m0, 1), T.height = std::max<uint32_t>(T.height >> m0, 1);
   }
   T.scale = scale;
-  T.meaning = "eigen-textures SxV (V Sigma), 4 components per RGBA texel; value = stored * scale; mip chain = box-filtered BTF";
+  // Mip levels of the eigen-textures are the BTF's own mip levels only when decoding is linear
+  // in them (rgb); for log / ratio components (dfmf, colour model 12) they are a filtered model.
+  T.meaning = std::string("eigen-textures SxV (V Sigma), 4 components per RGBA texel; value = stored * scale; mip chain = box-filtered ") +
+              (L.mode == 0 ? "BTF (decoding is linear)" : "components (decoding is non-linear: not the BTF's own mip levels)");
   T.channel_meaning = {"component 4j", "component 4j+1", "component 4j+2", "component 4j+3"};
   BTFC_ASSIGN_OR_RETURN(GpuTexture A, make_float_texture("eigen_abrdf", ff, uint32_t(nl), uint32_t(nv), uint32_t(L.abrdf_layers), std::move(abrdf)));
   A.meaning = "eigen-ABRDFs U at (x = light, y = view), layer = abrdf_layer_offset + row * layers + j, 4 components per texel";
