@@ -9,9 +9,10 @@ namespace btfc::gpu {
 
 // Codec exporters, one line each (defined in codecs/<codec>/<codec>_export.cpp).
 extern const Exporter k_fmf_exporter;
+extern const Exporter k_mlvq_exporter;
 
 namespace {
-const Exporter* const k_exporters[] = {&k_fmf_exporter};
+const Exporter* const k_exporters[] = {&k_fmf_exporter, &k_mlvq_exporter};
 }
 
 const Exporter* find_exporter(const std::string& codec) {
