@@ -171,8 +171,9 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
       {"grid", {{"nphi", g.nphi}, {"ntheta", g.ntheta}, {"nalpha", g.nalpha}, {"nbeta", g.nbeta}}},
       {"parameterisation",
        {{"phi", "view azimuth: atan2(wv.y, wv.x) in [0, 2 pi) (0 when wv.xy = 0); coordinate phi_v / (2 pi) * nphi, periodic"},
-        {"theta", "view polar angle acos(wv.z); coordinate theta_v / (pi / 2) * (ntheta - 1), clamped"},
-        {"light_frame", "l' = Rz(-phi_v) wl with l'.z = max(wl.z, 0): (cos phi wl.x + sin phi wl.y, -sin phi wl.x + cos phi wl.y, max(wl.z, 0))"},
+        {"theta", "view polar angle atan2(|wv.xy|, wv.z) (= acos(wv.z) for unit wv); coordinate theta_v / (pi / 2) * (ntheta - 1), clamped"},
+        {"light_frame", "l' = Rz(-phi_v) wl with l'.z = max(wl.z, 0): (c wl.x + s wl.y, -s wl.x + c wl.y, max(wl.z, 0)), "
+                        "(c, s) = (cos, sin) phi_v = wv.xy / |wv.xy| ((1, 0) when wv.xy = 0)"},
         {"alpha", "atan2(l'.x, l'.z) (0 when both are 0); coordinate (alpha + pi / 2) / pi * (nalpha - 1), clamped"},
         {"beta", "sin(beta) = l'.y / |l'| (0 when |l'| = 0); coordinate (sin(beta) + 1) / 2 * (nbeta - 1), clamped"},
         {"axis_of_one_node", "an axis with 1 node has coordinate 0"}}},

@@ -84,15 +84,17 @@ void axis(float v, int n, bool periodic, int i[2], float w[2]) {
   w[0] = 1 - t, w[1] = t;
 }
 
-// mlvq_grid_coord: (phi, theta, alpha, beta) in node units.
+// mlvq_grid_coord: (phi, theta, alpha, beta) in node units. The model's grid_coord in float, with
+// theta = atan2(|wv.xy|, wv.z) and (cos, sin) phi_v = wv.xy / |wv.xy| (equal for unit vectors).
 void grid_coord(const View& V, const Vec3& wl, const Vec3& wv, float c[4]) {
-  const float tv = std::acos(std::clamp(wv.z, -1.f, 1.f));
-  float pv = wv.x == 0 && wv.y == 0 ? 0.f : std::atan2(wv.y, wv.x);
+  const float r = std::sqrt(wv.x * wv.x + wv.y * wv.y);
+  const float tv = std::atan2(r, wv.z);
+  float pv = r == 0 ? 0.f : std::atan2(wv.y, wv.x);
   if (pv < 0) pv += 2 * k_pi;
   c[1] = V.n[3] > 1 ? std::clamp(tv / (0.5f * k_pi) * float(V.n[3] - 1), 0.f, float(V.n[3] - 1)) : 0.f;
   c[0] = pv / (2 * k_pi) * float(V.n[4]);
   if (!(c[0] < float(V.n[4]))) c[0] = 0;
-  const float cp = std::cos(pv), sp = std::sin(pv);
+  const float cp = r == 0 ? 1.f : wv.x / r, sp = r == 0 ? 0.f : wv.y / r;
   const float lx = cp * wl.x + sp * wl.y, ly = -sp * wl.x + cp * wl.y, lz = std::max(0.f, wl.z);
   const float len = std::sqrt(lx * lx + ly * ly + lz * lz);
   const float a = lx == 0 && lz == 0 ? 0.f : std::atan2(lx, lz);
@@ -202,16 +204,19 @@ void mlvq_axis(float v, int n, bool periodic, out ivec2 i, out vec2 w) {
   }
   w = vec2(1.0 - t, t);
 }
-// Grid coordinates (phi, theta, alpha, beta) in node units of a light / view pair.
+// Grid coordinates (phi, theta, alpha, beta) in node units of a light / view pair. theta from atan
+// (not acos) and the azimuth rotation from wv.xy / |wv.xy| (not cos / sin of phi): GPUs' acos, sin
+// and cos are coarse approximations (llvmpipe: ~1e-4 rad), their atan is accurate to ~1e-6.
 vec4 mlvq_grid_coord(vec3 wl, vec3 wv) {
-  float tv = acos(clamp(wv.z, -1.0, 1.0));
-  float pv = (wv.x == 0.0 && wv.y == 0.0) ? 0.0 : atan(wv.y, wv.x);
+  float r = sqrt(wv.x * wv.x + wv.y * wv.y);
+  float tv = atan(r, wv.z);
+  float pv = r == 0.0 ? 0.0 : atan(wv.y, wv.x);
   if (pv < 0.0) pv += 2.0 * PI;
   vec4 c;
   c.y = NTHETA > 1 ? clamp(tv / (0.5 * PI) * float(NTHETA - 1), 0.0, float(NTHETA - 1)) : 0.0;
   c.x = pv / (2.0 * PI) * float(NPHI);
   if (!(c.x < float(NPHI))) c.x = 0.0;
-  float cp = cos(pv), sp = sin(pv);
+  float cp = r == 0.0 ? 1.0 : wv.x / r, sp = r == 0.0 ? 0.0 : wv.y / r;
   float lx = cp * wl.x + sp * wl.y, ly = -sp * wl.x + cp * wl.y, lz = max(0.0, wl.z);
   float len = sqrt(lx * lx + ly * ly + lz * lz);
   float a = (lx == 0.0 && lz == 0.0) ? 0.0 : atan(lx, lz);
