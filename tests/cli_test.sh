@@ -68,6 +68,8 @@ check mlvq-decompress 0 "$BTFC" decompress "$W/q.btfc" -o "$W/qd.btfc"
 check mlvq-compare 0 "$BTFC" --json compare "$W/s.btfc" "$W/qd.btfc"
 python3 -c "import json,sys; m=json.load(open(sys.argv[1])); assert 0.01 < m['rel_l2'] < 0.4 and 0.3 < m['mean_ssim'] < 1, m; print('ok   mlvq-values', m['rel_l2'], m['mean_ssim'])" "$W/out.txt" || fails=$((fails + 1))
 check mlvq-eval-dir 0 "$BTFC" eval "$W/q.btfc" --texel 3,4 --wl 20,30 --wv 40,100
+check mlvq-export 0 "$BTFC" export "$W/q.btfc" --to "$W/qx"
+python3 -c "import json,os,sys; d=sys.argv[1]; m=json.load(open(d+'/manifest.json')); assert m['codec']=='mlvq' and m['evaluation']['grid']['nphi']==8, m['evaluation']; [os.stat(d+'/'+t['file']) for t in m['textures']]; assert open(d+'/btf.frag').read().startswith('#version 300 es'); print('ok   mlvq-export-files', len(m['textures']))" "$W/qx" || fails=$((fails + 1))
 head -c 300 "$W/q.btfc" > "$W/qtrunc.btfc"
 check mlvq-truncated 2 "$BTFC" decompress "$W/qtrunc.btfc" -o "$W/qt.btfc"
 expect_grep mlvq-truncated-msg "qtrunc.btfc" "$W/err.txt"

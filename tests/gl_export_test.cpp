@@ -51,6 +51,11 @@ struct Case {
   // fmf precision=half keeps SxV as half(x / s_c) * s_c with a per-component scale s_c, which
   // the rgba16f texture (one scale per texture) rounds again: lossy too.
   bool lossy_storage;
+  // Extra factor on the GL-vs-emulation bound for interpolated queries of shaders that map
+  // directions through transcendental functions: mlvq computes its (phi, theta, alpha, beta) grid
+  // coordinates with atan / sqrt, whose llvmpipe results differ from glibc's in the last bits
+  // and move the multilinear weights (measured up to 1.2e-4 relative on llvmpipe).
+  double interp_arith = 1;
 };
 
 const Case k_cases[] = {
@@ -63,8 +68,8 @@ const Case k_cases[] = {
     {"lpyr", "hdr", "lpyr:y=4:c=1", 1e6f, true, 1, false},
     {"lpca", "ldr", "lpca:clusters=4:components=3:iters=3", 1, true, 1, false},
     {"lpca", "hdr", "lpca:clusters=4:components=3:iters=3", 1e6f, true, 1, false},
-    {"mlvq", "ldr", "mlvq:phi=8:theta=4:alpha=7:beta=7", 1, true, 1, false},
-    {"mlvq", "hdr", "mlvq:phi=8:theta=4:alpha=7:beta=7", 1e6f, true, 1, false},
+    {"mlvq", "ldr", "mlvq:phi=8:theta=4:alpha=7:beta=7", 1, true, 1, false, 16},
+    {"mlvq", "hdr", "mlvq:phi=8:theta=4:alpha=7:beta=7", 1e6f, true, 1, false, 16},
 };
 
 const Btf& synthetic(float scale) {
@@ -199,7 +204,7 @@ TEST_P(GlExport, GpuMatchesEmulationAndModel) {
     for (int k = 0; k < 3; ++k) {
       const double G = (*gl)[i * 3 + size_t(k)], E = emu[i * 3 + size_t(k)];
       ASSERT_TRUE(std::isfinite(G)) << "query " << i;
-      const double de = std::fabs(G - E), tb = arith_bound(c, E, rms);
+      const double de = std::fabs(G - E), tb = arith_bound(c, E, rms) * (measured ? 1.0 : c.interp_arith);
       e_emu = std::max(e_emu, de), e_emu_rel = std::max(e_emu_rel, de / tb);
       if (de > tb && ++bad_emu <= 5)
         ADD_FAILURE() << "GL vs emulation, query " << i << " texel (" << g.x[i] << ", " << g.y[i] << ") light " << g.q[i].light

@@ -11,9 +11,10 @@ namespace btfc::gpu {
 extern const Exporter k_fmf_exporter;
 extern const Exporter k_lpyr_exporter;
 extern const Exporter k_lpca_exporter;
+extern const Exporter k_mlvq_exporter;
 
 namespace {
-const Exporter* const k_exporters[] = {&k_fmf_exporter, &k_lpyr_exporter, &k_lpca_exporter};
+const Exporter* const k_exporters[] = {&k_fmf_exporter, &k_lpyr_exporter, &k_lpca_exporter, &k_mlvq_exporter};
 }
 
 const Exporter* find_exporter(const std::string& codec) {
