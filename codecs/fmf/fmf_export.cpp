@@ -3,7 +3,7 @@
 //
 // Textures (formats/gpu/export.h for the shader contract):
 //   eigen_texture  2D array W x H, sum_b ceil(C_b / 4) layers, RGBA = components 4j..4j+3 of
-//                  block b's SxV (eigen-textures, V Sigma) / scale; full mip chain (box filter:
+//                  block b's SxV (eigen-textures, V Sigma) / per-component scale; full mip chain (box filter:
 //                  a mip level of the eigen-textures is exactly the mip level of the BTF).
 //   eigen_abrdf    2D array nL x nV (x = light, y = view), layer aoff_b + r * K_b + j holds
 //                  components 4j..4j+3 of block b's U row for (light, view, colour r).
@@ -43,29 +43,33 @@ Layout layout_of(const ExportBundle& b) {
 }
 
 // One factorized value: block b, row r, texel xy, measured (l, v), from stored texels.
-float block_value(const GpuTexture& T, const GpuTexture& A, const Layout& L, int b, int r, int x, int y, int l, int v) {
+// As the shader: dot(texel * CSCALE[layer], abrdf) per layer, summed in layer order.
+float block_value(const GpuTexture& T, const GpuTexture& A, const std::vector<float>& cs, const Layout& L, int b, int r, int x, int y,
+                  int l, int v) {
   float s = 0;
   for (int j = 0; j < L.K[b]; ++j) {
     const float* t = &T.f[0][((size_t(L.toff[b] + j) * T.height + size_t(y)) * T.width + size_t(x)) * 4];
     const float* a = &A.f[0][((size_t(L.aoff[b] + r * L.K[b] + j) * A.height + size_t(v)) * A.width + size_t(l)) * 4];
-    s += t[0] * a[0] + t[1] * a[1] + t[2] * a[2] + t[3] * a[3];
+    const float* c = &cs[size_t(L.toff[b] + j) * 4];
+    s += (t[0] * c[0]) * a[0] + (t[1] * c[1]) * a[1] + (t[2] * c[2]) * a[2] + (t[3] * c[3]) * a[3];
   }
-  return s * float(T.scale);
+  return s;
 }
 
 void measured(const ExportBundle& b, const Layout& L, int x, int y, int l, int v, float* rgb) {
   const GpuTexture& T = *b.find("eigen_texture");
   const GpuTexture& A = *b.find("eigen_abrdf");
+  const std::vector<float> cs = b.evaluation.at("component_scale").get<std::vector<float>>();
   rgb[0] = rgb[1] = rgb[2] = 0;
   if (L.mode != 11) {
     for (int c = 0; c < L.R[0] && c < 3; ++c) {
-      rgb[c] = block_value(T, A, L, 0, c, x, y, l, v);
+      rgb[c] = block_value(T, A, cs, L, 0, c, x, y, l, v);
       if (L.mode == 12) rgb[c] = std::exp(rgb[c]) - k_drr_eps;
     }
     return;
   }
-  const float Y = std::exp(block_value(T, A, L, 0, 0, x, y, l, v)) - k_drr_eps;
-  const float yuv[3] = {Y, block_value(T, A, L, 1, 0, x, y, l, v) * (Y + k_drr_eps), block_value(T, A, L, 2, 0, x, y, l, v) * (Y + k_drr_eps)};
+  const float Y = std::exp(block_value(T, A, cs, L, 0, 0, x, y, l, v)) - k_drr_eps;
+  const float yuv[3] = {Y, block_value(T, A, cs, L, 1, 0, x, y, l, v) * (Y + k_drr_eps), block_value(T, A, cs, L, 2, 0, x, y, l, v) * (Y + k_drr_eps)};
   for (int c = 0; c < 3; ++c) rgb[c] = k_rgb_from_yuv[c][0] * yuv[0] + k_rgb_from_yuv[c][1] * yuv[1] + k_rgb_from_yuv[c][2] * yuv[2];
 }
 
@@ -110,12 +114,17 @@ std::string shader(const ExportBundle& b, const Layout& L) {
   const GpuTexture& T = *b.find("eigen_texture");  // level 0 of the export (a scene may drop finer levels)
   s += "const ivec2 SIZE = ivec2(" + std::to_string(T.width) + ", " + std::to_string(T.height) + ");\n";
   s += "const int DIR_N = " + std::to_string(b.find("dir_index")->width) + ";\n";
-  s += "const float TEX_SCALE = " + f(b.find("eigen_texture")->scale) + ";\n";
+  // Per-component scales of the eigen-textures (stored values are SxV / scale, |.| <= 1).
+  const std::vector<float> cs = b.evaluation.at("component_scale").get<std::vector<float>>();
+  s += "const vec4 CSCALE[" + std::to_string(cs.size() / 4) + "] = vec4[](";
+  for (size_t i = 0; i < cs.size(); i += 4)
+    s += std::string(i ? ", " : "") + "vec4(" + f(cs[i]) + ", " + f(cs[i + 1]) + ", " + f(cs[i + 2]) + ", " + f(cs[i + 3]) + ")";
+  s += ");\n";
   s += "float fmf_block(int toff, int aoff, int K, ivec2 xy, ivec2 lv) {\n"
        "  float s = 0.0;\n"
        "  for (int j = 0; j < K; ++j)\n"
-       "    s += dot(texelFetch(u_eigen_texture, ivec3(xy, toff + j), 0), texelFetch(u_eigen_abrdf, ivec3(lv, aoff + j), 0));\n"
-       "  return s * TEX_SCALE;\n}\n";
+       "    s += dot(texelFetch(u_eigen_texture, ivec3(xy, toff + j), 0) * CSCALE[toff + j], texelFetch(u_eigen_abrdf, ivec3(lv, aoff + j), 0));\n"
+       "  return s;\n}\n";
   s += "vec3 fmf_measured(ivec2 xy, int l, int v) {\n  ivec2 lv = ivec2(l, v);\n  vec3 c = vec3(0.0);\n";
   auto blk = [&](int i, int r) {
     return "fmf_block(" + std::to_string(L.toff[i]) + ", " + std::to_string(L.aoff[i] + r * L.K[i]) + ", " + std::to_string(L.K[i]) + ", xy, lv)";
@@ -221,10 +230,18 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
             abrdf[((size_t(L.aoff[i] + r * L.K[i] + c / 4) * nv + v) * nl + l) * 4 + size_t(c % 4)] = bl.U[row * size_t(bl.C) + size_t(c)];
         }
   }
+  // Each eigen-texture component is stored divided by its max |value| (the model's own storage
+  // scale: a half model's SxV is half(x / s_c) s_c, so this stores its half values exactly, and
+  // no HDR range can overflow half); the scales are shader constants (evaluation.component_scale).
+  std::vector<float> cscale(size_t(L.tex_layers) * 4, 1.f);
+  for (size_t layer = 0; layer < size_t(L.tex_layers); ++layer)
+    for (size_t lane = 0; lane < 4; ++lane) {
+      float mx = 0;
+      for (size_t t = 0; t < W * H; ++t) mx = std::max(mx, std::fabs(tex[(layer * W * H + t) * 4 + lane]));
+      if (mx > 0) cscale[layer * 4 + lane] = mx;
+      for (size_t t = 0; t < W * H; ++t) tex[(layer * W * H + t) * 4 + lane] /= cscale[layer * 4 + lane];
+    }
   const TexFormat ff = opt.half ? TexFormat::rgba16f : TexFormat::rgba32f;
-  const double scale = opt.half && !opt.clamp_half ? half_safe_scale(tex) : 1.0;
-  if (scale != 1)
-    for (float& x : tex) x = float(x / scale);
   ExportBundle b;
   BTFC_ASSIGN_OR_RETURN(GpuTexture T, make_float_texture("eigen_texture", ff, uint32_t(W), uint32_t(H), uint32_t(L.tex_layers), std::move(tex), true));
   if (m0 > 0 || m1 < int(T.num_levels()) - 1) {  // the scene samples only levels m0..m1
@@ -232,10 +249,9 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
     T.f.erase(T.f.begin(), T.f.begin() + m0);
     T.width = std::max<uint32_t>(T.width >> m0, 1), T.height = std::max<uint32_t>(T.height >> m0, 1);
   }
-  T.scale = scale;
   // Mip levels of the eigen-textures are the BTF's own mip levels only when decoding is linear
   // in them (rgb); for log / ratio components (dfmf, colour model 12) they are a filtered model.
-  T.meaning = std::string("eigen-textures SxV (V Sigma), 4 components per RGBA texel; value = stored * scale; mip chain = box-filtered ") +
+  T.meaning = std::string("eigen-textures SxV (V Sigma), 4 components per RGBA texel; value = stored * evaluation.component_scale[4 layer + lane]; mip chain = box-filtered ") +
               (L.mode == 0 ? "BTF (decoding is linear)" : "components (decoding is non-linear: not the BTF's own mip levels)");
   T.channel_meaning = {"component 4j", "component 4j+1", "component 4j+2", "component 4j+3"};
   BTFC_ASSIGN_OR_RETURN(GpuTexture A, make_float_texture("eigen_abrdf", ff, uint32_t(nl), uint32_t(nv), uint32_t(L.abrdf_layers), std::move(abrdf)));
@@ -260,7 +276,8 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
                       {"abrdf_layer_offset", L.aoff[i]}});
   b.evaluation = {{"color_mode", L.mode},
                   {"blocks", blocks},
-                  {"formula", "value(b, r) = scale * sum_j dot(eigen_texture[toff_b + j](x, y), eigen_abrdf[aoff_b + r * layers_b + j](light, view))"},
+                  {"formula", "value(b, r) = sum_j dot(eigen_texture[toff_b + j](x, y) * component_scale[toff_b + j], eigen_abrdf[aoff_b + r * layers_b + j](light, view))"},
+                  {"component_scale", cscale},
                   {"color", L.mode == 11 ? "dfmf: Y = exp(value(y)) - 1e-5; U = value(u) (Y + 1e-5); V = value(v) (Y + 1e-5); RGB = M YUV"
                             : L.mode == 12 ? "rgb: exp(value(0, c)) - 1e-5" : "rgb: value(0, c)"},
                   {"rgb_from_yuv", {{k_rgb_from_yuv[0][0], k_rgb_from_yuv[0][1], k_rgb_from_yuv[0][2]},
