@@ -153,6 +153,8 @@ int main(int argc, char** argv) {
   rend->add_option("--tiles", rn.tiles, "sphere: texture repeats in theta (twice as many in phi)")->check(CLI::Range(1, 1024));
   rend->callback([&] { code = cmd_render(g, rn); });
 
+  add_bsvtf_commands(app, g, code);
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
