@@ -7,6 +7,7 @@
 #include <memory>
 #include <random>
 #include <string>
+#include <unistd.h>
 
 #include "codecs/fmf/fmf.h"
 
@@ -73,10 +74,20 @@ inline std::unique_ptr<btfc::Model> make_model(int w, int h, int C, double noise
   return m.ok() ? std::move(m).value() : nullptr;
 }
 
+inline std::filesystem::path tmp_dir() {
+  return std::filesystem::temp_directory_path() / ("btfc_bsvtf_test_" + std::to_string(::getpid()));
+}
+// Removes this process's scratch directory at exit.
+inline struct TmpCleanup {
+  ~TmpCleanup() {
+    std::error_code ec;
+    std::filesystem::remove_all(tmp_dir(), ec);
+  }
+} tmp_cleanup;
+
 inline std::string tmp_path(const std::string& name) {
-  const auto dir = std::filesystem::temp_directory_path() / ("btfc_bsvtf_test_" + std::to_string(::getpid()));
-  std::filesystem::create_directories(dir);
-  return (dir / name).string();
+  std::filesystem::create_directories(tmp_dir());
+  return (tmp_dir() / name).string();
 }
 
 }  // namespace bsvtf_test
