@@ -9,6 +9,8 @@
 #include "core/btf.h"
 #include "core/status.h"
 
+namespace CLI { class App; }
+
 namespace btfc::cli {
 
 struct Global {
@@ -119,6 +121,9 @@ int cmd_render(const Global& g, const RenderArgs& a);
 bool compress_streamed(const Global& g, const CompressArgs& a, int& code);
 bool decompress_streamed(const Global& g, const DecompressArgs& a, int& code);
 bool bench_streamed(const Global& g, const BenchArgs& a, int& code);
+
+// `bsvtf` and `tilecache` (cli/bsvtf_commands.cpp): registers both on `app`; they set `code`.
+void add_bsvtf_commands(CLI::App& app, const Global& g, int& code);
 
 }  // namespace btfc::cli
 

@@ -154,6 +154,7 @@ int main(int argc, char** argv) {
   rend->callback([&] { code = cmd_render(g, rn); });
 
   add_export_commands(app, g, code);
+  add_bsvtf_commands(app, g, code);
 
   try {
     app.parse(argc, argv);

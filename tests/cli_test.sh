@@ -138,6 +138,15 @@ python3 -c "import json,sys; j=json.load(open(sys.argv[1])); t=j['target']; asse
 check target-unreachable 1 "$BTFC" compress "$W/s.btfc" -c fmf:precision=half -o "$W/t2.btfc" --target-psnr 500
 [ ! -e "$W/t2.btfc" ] && echo "ok   target-no-output" || { echo "FAIL target-no-output"; fails=$((fails + 1)); }
 check target-two 1 "$BTFC" compress "$W/s.btfc" -c fmf -o "$W/t3.btfc" --target-psnr 30 --max-bytes 1000
+# BSVTF streaming file and the tile-cache simulator
+check bsvtf 0 "$BTFC" --json bsvtf "$W/m.btfc" -o "$W/m.bsvtf" --quality 80 --tile 8
+python3 -c "import json,sys; j=json.load(open(sys.argv[1])); assert j['textures']==3 and j['levels']==2 and 20<j['psnr']<80 and j['ratio_vs_f32']>1, j; print('ok   bsvtf-values', j['psnr'], j['ratio_vs_f32'])" "$W/out.txt" || fails=$((fails + 1))
+check tilecache 0 "$BTFC" tilecache "$W/m.bsvtf" --frames 3 --cache-tiles 3,100 --screen 32x24 --csv "$W/tc.csv"
+expect_grep tilecache-csv "^100,2," "$W/tc.csv"
+check bsvtf-raw-input 1 "$BTFC" bsvtf "$W/s.btfc" -o "$W/bad.bsvtf"
+[ ! -e "$W/bad.bsvtf" ] && echo "ok   bsvtf-no-output" || { echo "FAIL bsvtf-no-output"; fails=$((fails + 1)); }
+check tilecache-not-bsvtf 2 "$BTFC" tilecache "$W/m.btfc"
+expect_grep tilecache-not-bsvtf-msg "wrong magic" "$W/err.txt"
 # render
 check render-flat 0 "$BTFC" render "$W/m.btfc" -o "$W/r.png" --light 30,45 --distance 2
 check render-sphere 0 "$BTFC" render "$W/s.btfc" -o "$W/r.exr" --shape sphere --size 48
