@@ -124,14 +124,7 @@ bool bench_streamed(const Global& g, const BenchArgs& a, int& code);
 
 // `bsvtf` and `tilecache` (cli/bsvtf_commands.cpp): registers both on `app`; they set `code`.
 void add_bsvtf_commands(CLI::App& app, const Global& g, int& code);
-
-}  // namespace btfc::cli
-
-namespace CLI {
-class App;
-}
-namespace btfc::cli {
-// `btfc export` (cli/export_commands.cpp) registers itself: its arguments live in that file.
+// `export` (cli/export_commands.cpp) likewise: its arguments live in that file.
 void add_export_commands(CLI::App& app, const Global& g, int& code);
 
 }  // namespace btfc::cli

@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli/commands.h"
+#include "codecs/fmf/bsvtf.h"
 #include "codecs/lpca/lpca.h"
 #include "formats/btf_io.h"
 #include "formats/gpu/export.h"
@@ -15,8 +16,8 @@ namespace {
 
 struct ExportArgs {
   std::string in, dir, env, scene, material;
-  bool float32 = false, clamp_half = false, no_previews = false;
-  int direction_map = 64, sh_order = 5;
+  bool float32 = false, clamp_half = false, no_previews = false, no_bsvtf = false;
+  int direction_map = 64, sh_order = 5, bsvtf_quality = BsvtfOptions{}.quality;
 };
 
 int cmd_export(const Global& g, const ExportArgs& a) {
@@ -41,6 +42,23 @@ int cmd_export(const Global& g, const ExportArgs& a) {
   }
   auto bundle = gpu::build_export(m, opt);
   if (!bundle.ok()) return fail(g, bundle.status().with_context(a.in));
+  BsvtfReport bsvtf;
+  if (bundle->codec == "fmf" && !a.no_bsvtf) {
+    // The BSVTF streaming file (seed 000 sections 3-7) next to the textures: the same model,
+    // tiled for level-of-detail streaming.
+    bundle->write_extra = [&](const std::string& dir) -> Result<nlohmann::json> {
+      BsvtfOptions bo;
+      bo.quality = a.bsvtf_quality;
+      BTFC_RETURN_IF_ERROR(write_bsvtf(m, bo, dir + "/model.bsvtf", &bsvtf));
+      return nlohmann::json::array({{{"file", "model.bsvtf"},
+                                     {"meaning", "BSVTF streaming file (docs/FORMAT.md): eigen-textures as 64 x 64 DCT tiles with 4 px borders, "
+                                                 "mip levels as residuals to the parent, eigen-ABRDF packets"},
+                                     {"quality", bo.quality},
+                                     {"bytes", bsvtf.file_bytes},
+                                     {"tiles", bsvtf.tiles},
+                                     {"eigen_texture_psnr_db", bsvtf.psnr}}});
+    };
+  }
   if (Status s = gpu::write_export_dir(bundle.value(), a.dir, !a.no_previews); !s.ok()) return fail(g, s);
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   for (const std::string& w : bundle->warnings) std::cerr << "warning: " << a.in << ": " << w << "\n";
@@ -57,6 +75,8 @@ int cmd_export(const Global& g, const ExportArgs& a) {
                 << (t.layers ? " x " + std::to_string(t.layers) + " layers" : std::string()) << ", " << t.num_levels() << " level(s), "
                 << t.total_bytes() << " bytes" << (t.scale != 1 ? ", scale " + std::to_string(t.scale) : std::string()) << "\n";
     if (!bundle->scene_report.is_null()) std::cout << "  scene: " << bundle->scene_report.dump() << "\n";
+    if (bsvtf.file_bytes)
+      std::cout << "  model.bsvtf  " << bsvtf.tiles << " tiles, " << bsvtf.file_bytes << " bytes, eigen-texture PSNR " << bsvtf.psnr << " dB\n";
     std::cout << "  manifest.json, btf.frag" << (a.no_previews ? "" : ", previews/") << "; textures " << bundle->texture_bytes()
               << " bytes (model payload " << bundle->model_payload_bytes << ")\n";
   }
@@ -77,6 +97,8 @@ void add_export_commands(CLI::App& app, const Global& g, int& code) {
   ex->add_option("--sh-order", a.sh_order, "lpca: SH order of the environment projection")->check(CLI::Range(1, 12));
   ex->add_option("--scene", a.scene, "scene.json: footprints, light/view cones, GPU budget; keep only what the scene needs");
   ex->add_option("--material", a.material, "material of the scene file (default: the first)");
+  ex->add_option("--bsvtf-quality", a.bsvtf_quality, "fmf: DCT quality of the BSVTF tiles (1..100)")->check(CLI::Range(1, 100));
+  ex->add_flag("--no-bsvtf", a.no_bsvtf, "fmf: skip the BSVTF streaming file");
   ex->add_flag("--no-previews", a.no_previews, "skip the EXR / PNG previews");
   ex->callback([&] { code = cmd_export(g, a); });
 }

@@ -62,7 +62,13 @@ Status write_export_dir(const ExportBundle& b, const std::string& dir, bool prev
     const KeyValues kv = {{"btfc.codec", b.codec}, {"btfc.spec", b.spec}, {"btfc.texture", t.name}};
     if (Status s = write_ktx2(t, (tmp / (t.name + ".ktx2")).string(), kv); !s.ok()) return fail(s);
   }
-  if (Status s = write_text(tmp / "manifest.json", manifest_json(b).dump(2) + "\n"); !s.ok()) return fail(s);
+  nlohmann::json manifest = manifest_json(b);
+  if (b.write_extra) {
+    Result<nlohmann::json> extra = b.write_extra(tmp.string());
+    if (!extra.ok()) return fail(extra.status());
+    manifest["files"] = extra.value();
+  }
+  if (Status s = write_text(tmp / "manifest.json", manifest.dump(2) + "\n"); !s.ok()) return fail(s);
   if (Status s = write_text(tmp / "btf.frag", b.glsl); !s.ok()) return fail(s);
   if (previews) {
     fs::create_directories(tmp / "previews", ec);

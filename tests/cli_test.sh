@@ -155,11 +155,13 @@ check render-below 1 "$BTFC" render "$W/m.btfc" -o "$W/r2.png" --view 120,0
 
 # export (fmf here; other codecs' lines follow their exporters)
 check export-fmf 0 "$BTFC" export "$W/m.btfc" --to "$W/exp-fmf"
-for f in manifest.json btf.frag eigen_texture.ktx2 eigen_abrdf.ktx2 dir_index.ktx2 dir_weight.ktx2 previews/eigen_texture.exr previews/dir_index.png; do
+for f in manifest.json btf.frag eigen_texture.ktx2 eigen_abrdf.ktx2 dir_index.ktx2 dir_weight.ktx2 model.bsvtf previews/eigen_texture.exr previews/dir_index.png; do
   [ -s "$W/exp-fmf/$f" ] || { echo "FAIL export-fmf-files: $f missing"; fails=$((fails + 1)); }
 done
-check export-json 0 "$BTFC" --json export "$W/m.btfc" --to "$W/exp-fmf2" --float --no-previews --direction-map 32
+check export-json 0 "$BTFC" --json export "$W/m.btfc" --to "$W/exp-fmf2" --float --no-previews --no-bsvtf --direction-map 32
+[ ! -e "$W/exp-fmf2/model.bsvtf" ] && echo "ok   export-no-bsvtf" || { echo "FAIL export-no-bsvtf"; fails=$((fails + 1)); }
 expect_grep export-json-format '"format": "rgba32f"' "$W/out.txt"
+check export-bsvtf-info 0 "$BTFC" tilecache "$W/exp-fmf/model.bsvtf" --cache-tiles 4 --frames 4
 check export-not-empty 2 "$BTFC" export "$W/m.btfc" --to "$W/exp-fmf"
 check export-raw 1 "$BTFC" export "$W/s.btfc" --to "$W/exp-raw"
 [ ! -e "$W/exp-raw" ] && [ ! -e "$W/exp-raw.tmp-export" ] && echo "ok   export-no-output" || { echo "FAIL export-no-output"; fails=$((fails + 1)); }

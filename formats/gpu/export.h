@@ -24,6 +24,7 @@
 // Every exporter has a CPU emulation of its shader that reads only the bundle's stored texture
 // values (ShaderQuery below); tests check emulation == model evaluation and GPU == emulation.
 #pragma once
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -56,6 +57,9 @@ struct ExportBundle {
   std::vector<std::string> warnings;
   uint64_t model_payload_bytes = 0;
   nlohmann::json scene_report;  // null without a scene (manifest "scene")
+  // Other files of the export (e.g. fmf's model.bsvtf): called with the temporary directory
+  // before the manifest is written; returns manifest entries ({"file", "meaning", "bytes"...}).
+  std::function<Result<nlohmann::json>(const std::string& dir)> write_extra;
 
   const GpuTexture* find(const std::string& name) const;
   uint64_t clamped() const;
