@@ -7,6 +7,7 @@
 
 #include "cli/commands.h"
 #include "codecs/fmf/bsvtf.h"
+#include "codecs/fmf/fmf_export.h"
 #include "codecs/lpca/lpca.h"
 #include "formats/btf_io.h"
 #include "formats/gpu/export.h"
@@ -49,7 +50,11 @@ int cmd_export(const Global& g, const ExportArgs& a) {
     bundle->write_extra = [&](const std::string& dir) -> Result<nlohmann::json> {
       BsvtfOptions bo;
       bo.quality = a.bsvtf_quality;
-      BTFC_RETURN_IF_ERROR(write_bsvtf(m, bo, dir + "/model.bsvtf", &bsvtf));
+      std::unique_ptr<Model> cut;  // a scene keeps only its levels, components and directions
+      if (opt.scene) {
+        BTFC_ASSIGN_OR_RETURN(cut, gpu::fmf_scene_model(m, opt));
+      }
+      BTFC_RETURN_IF_ERROR(write_bsvtf(cut ? *cut : m, bo, dir + "/model.bsvtf", &bsvtf));
       return nlohmann::json::array({{{"file", "model.bsvtf"},
                                      {"meaning", "BSVTF streaming file (docs/FORMAT.md): eigen-textures as 64 x 64 DCT tiles with 4 px borders, "
                                                  "mip levels as residuals to the parent, eigen-ABRDF packets"},

@@ -9,6 +9,7 @@
 #include "codecs/codec.h"
 #include "core/interp.h"
 #include "core/synth.h"
+#include "codecs/fmf/fmf_export.h"
 #include "formats/gpu/export.h"
 #include "formats/gpu/ktx2.h"
 
@@ -411,4 +412,41 @@ TEST(Scene, FootprintDropsFineMipsAndBudgetCutsComponentsWithPredictedError) {
   auto bi = build_export(*m, impossible);
   ASSERT_FALSE(bi.ok());
   EXPECT_NE(bi.status().message().find("over the scene's GPU budget"), std::string::npos);
+}
+
+TEST(Scene, SceneModelIsWhatTheExportKeeps) {
+  // model.bsvtf of a scene export is built from fmf_scene_model: it must hold exactly the
+  // levels, components and directions of the KTX2 export (float storage: float rounding only).
+  const Btf b = synth(16, 12);
+  const double rms = rms_of(b);
+  for (const std::string spec : {"fmf:rank=12:precision=float", "fmf:color=dfmf:rank=8:chroma_rank=4:precision=float"}) {
+    auto m = encode(b, spec);
+    ASSERT_TRUE(m);
+    ExportOptions o;
+    o.half = false;
+    o.scene = parse_scene(R"({"materials": [{"footprint": [2, 4], "light_cone": {"theta": 45, "phi": 0, "angle": 20},
+                                              "gpu_budget": 700000}]})", "s").value();
+    auto bundle = build_export(*m, o);
+    ASSERT_TRUE(bundle.ok()) << bundle.status().message();
+    auto sm = fmf_scene_model(*m, o);
+    ASSERT_TRUE(sm.ok()) << sm.status().message();
+    const BtfDesc& sd = sm.value()->desc();
+    EXPECT_EQ(sd.width, 8);
+    EXPECT_EQ(sd.height, 6);
+    EXPECT_EQ(sd.num_lights(), bundle->evaluation["light_indices"].size());
+    EXPECT_EQ(sd.num_views(), b.desc().num_views());
+    double worst = 0;
+    for (size_t l = 0; l < sd.num_lights(); l += 3)
+      for (size_t v = 0; v < sd.num_views(); v += 7)
+        for (int y = 0; y < sd.height; ++y)
+          for (int x = 0; x < sd.width; ++x) {
+            ShaderQuery q;
+            q.u = (x + 0.5f) / float(sd.width), q.v = (y + 0.5f) / float(sd.height), q.light = int(l), q.view = int(v);
+            float e[3], w[3] = {0, 0, 0};
+            find_exporter("fmf")->emulate(bundle.value(), q, e);
+            sm.value()->eval(x, y, int(l), int(v), w);
+            for (int c = 0; c < 3; ++c) worst = std::max(worst, std::fabs(double(e[c]) - w[c]) / rms);
+          }
+    EXPECT_LE(worst, 4e-6) << spec;
+  }
 }

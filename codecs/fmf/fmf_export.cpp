@@ -13,6 +13,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "codecs/fmf/fmf_export.h"
+
 #include "codecs/fmf/fmf.h"
 #include "formats/gpu/export.h"
 
@@ -168,6 +170,47 @@ uint64_t bytes_for(int K, int KA, const BtfDesc& d, int m0, int m1, size_t nl, s
   return (tex * uint64_t(K) + uint64_t(nl) * nv * uint64_t(KA)) * 4 * uint64_t(bpc) + uint64_t(dir_n) * uint64_t(dir_n) * 2 * (8 + 16);
 }
 
+// What the scene needs (formats/gpu/scene.h): mip levels, directions, components.
+struct SceneCut {
+  int m0 = 0, m1 = 0;
+  std::vector<int> ls, vs;
+  int C[3] = {0, 0, 0}, Ck[3] = {0, 0, 0};  // components of the model, kept
+  uint64_t need = 0;                         // texture bytes of the export
+};
+
+SceneCut scene_cut(const FmfFactorsView& fv, const BtfDesc& d, const ExportOptions& opt) {
+  SceneCut c;
+  const int nb = int(fv.blocks.size());
+  int levels = 1;
+  while ((d.width >> levels) > 0 || (d.height >> levels) > 0) ++levels;
+  c.m1 = levels - 1;
+  for (size_t i = 0; i < d.num_lights(); ++i) c.ls.push_back(int(i));
+  for (size_t i = 0; i < d.num_views(); ++i) c.vs.push_back(int(i));
+  if (opt.scene) {
+    scene_mip_range(*opt.scene, c.m0, c.m1);
+    c.m0 = std::min(c.m0, levels - 1), c.m1 = std::clamp(c.m1, c.m0, levels - 1);
+    c.ls = directions_in_cone(d.lights, opt.scene->light_cone);
+    c.vs = directions_in_cone(d.views, opt.scene->view_cone);
+  }
+  for (int i = 0; i < nb; ++i) c.C[i] = fv.blocks[size_t(i)].C;
+  const int bpc = opt.half ? 2 : 4;
+  auto layers_for = [&](int q, int* Cq) {  // q eigen-texture layers for block 0, the others in proportion
+    int K = 0, KA = 0;
+    const int k0 = std::max(1, (c.C[0] + 3) / 4);
+    for (int i = 0; i < nb; ++i) {
+      const int ki = std::max(1, (c.C[i] + 3) / 4), kq = std::max(1, (q * ki + k0 - 1) / k0);
+      Cq[i] = std::min(c.C[i], 4 * kq);
+      K += kq, KA += kq * (fv.per_channel ? 1 : d.channels);
+    }
+    return bytes_for(K, KA, d, c.m0, c.m1, c.ls.size(), c.vs.size(), bpc, opt.direction_map);
+  };
+  int q = std::max(1, (c.C[0] + 3) / 4);
+  c.need = layers_for(q, c.Ck);
+  if (opt.scene && opt.scene->gpu_budget)
+    while (c.need > opt.scene->gpu_budget && q > 1) c.need = layers_for(--q, c.Ck);
+  return c;
+}
+
 Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
   BTFC_ASSIGN_OR_RETURN(FmfFactorsView fv, fmf_factors(model));
   const BtfDesc& d = model.desc();
@@ -177,37 +220,12 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
     return unsupported("export: fmf colour model " + std::to_string(fv.bonn_color_model) + " has no shader (rgb and dfmf only)");
   L.nb = int(fv.blocks.size());
 
-  // What the scene needs (formats/gpu/scene.h): mip levels, directions, components.
-  int levels = 1;
-  while ((d.width >> levels) > 0 || (d.height >> levels) > 0) ++levels;
-  int m0 = 0, m1 = levels - 1;
-  std::vector<int> ls, vs;
-  for (size_t i = 0; i < d.num_lights(); ++i) ls.push_back(int(i));
-  for (size_t i = 0; i < d.num_views(); ++i) vs.push_back(int(i));
-  if (opt.scene) {
-    scene_mip_range(*opt.scene, m0, m1);
-    m0 = std::min(m0, levels - 1), m1 = std::clamp(m1, m0, levels - 1);
-    ls = directions_in_cone(d.lights, opt.scene->light_cone);
-    vs = directions_in_cone(d.views, opt.scene->view_cone);
-  }
-  int C[3] = {0, 0, 0};
-  for (int i = 0; i < L.nb; ++i) C[i] = fv.blocks[size_t(i)].C;
-  const int bpc = opt.half ? 2 : 4;
-  auto layers_for = [&](int q, int* Cq) {  // q eigen-texture layers for block 0, the others in proportion
-    int K = 0, KA = 0;
-    const int k0 = std::max(1, (C[0] + 3) / 4);
-    for (int i = 0; i < L.nb; ++i) {
-      const int ki = std::max(1, (C[i] + 3) / 4), kq = std::max(1, (q * ki + k0 - 1) / k0);
-      Cq[i] = std::min(C[i], 4 * kq);
-      K += kq, KA += kq * (fv.per_channel ? 1 : d.channels);
-    }
-    return bytes_for(K, KA, d, m0, m1, ls.size(), vs.size(), bpc, opt.direction_map);
-  };
-  int Ck[3];
-  int q = std::max(1, (C[0] + 3) / 4);
-  uint64_t need = layers_for(q, Ck);
-  if (opt.scene && opt.scene->gpu_budget)
-    while (need > opt.scene->gpu_budget && q > 1) need = layers_for(--q, Ck);
+  const SceneCut cut = scene_cut(fv, d, opt);
+  const int m0 = cut.m0, m1 = cut.m1;
+  const std::vector<int>&ls = cut.ls, &vs = cut.vs;
+  const int* C = cut.C;
+  const int* Ck = cut.Ck;
+  const uint64_t need = cut.need;
 
   for (int i = 0; i < L.nb; ++i) {
     L.K[i] = std::max(1, (Ck[i] + 3) / 4);
@@ -319,6 +337,47 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
 }
 
 }  // namespace
+
+Result<std::unique_ptr<Model>> fmf_scene_model(const Model& model, const ExportOptions& opt) {
+  BTFC_ASSIGN_OR_RETURN(FmfFactorsView fv, fmf_factors(model));
+  const BtfDesc& d = model.desc();
+  if ((fv.per_channel && fv.bonn_color_model != 11) || (!fv.per_channel && fv.bonn_color_model != 0 && fv.bonn_color_model != 12))
+    return unsupported("export: fmf colour model " + std::to_string(fv.bonn_color_model) + " has no scene model (rgb and dfmf only)");
+  const SceneCut cut = scene_cut(fv, d, opt);
+  BtfDesc sd = d;
+  sd.lights.dirs.clear(), sd.views.dirs.clear();
+  for (int l : cut.ls) sd.lights.dirs.push_back(d.lights.dirs[size_t(l)]);
+  for (int v : cut.vs) sd.views.dirs.push_back(d.views.dirs[size_t(v)]);
+  sd.lights.identify(), sd.views.identify();
+  std::vector<FmfFactors> blocks;
+  for (size_t i = 0; i < fv.blocks.size(); ++i) {
+    const FmfBlockView& bl = fv.blocks[i];
+    const int C = cut.Ck[i];
+    FmfFactors f;
+    f.name = bl.name, f.C = C;
+    f.S.assign(bl.S, bl.S + C);
+    // Eigen-textures box-filtered to level m0 (the texture's own mip chain, in float).
+    std::vector<float> layers(size_t(C) * bl.texels);
+    for (int c = 0; c < C; ++c)
+      for (size_t t = 0; t < bl.texels; ++t) layers[size_t(c) * bl.texels + t] = bl.SxV[t * size_t(bl.C) + size_t(c)];
+    BTFC_ASSIGN_OR_RETURN(GpuTexture tex, make_float_texture("sxv", TexFormat::r32f, uint32_t(d.width), uint32_t(d.height), uint32_t(C),
+                                                             std::move(layers), cut.m0 > 0));
+    const size_t n = size_t(tex.level_width(uint32_t(cut.m0))) * tex.level_height(uint32_t(cut.m0));
+    f.SxV.resize(n * size_t(C));
+    for (size_t t = 0; t < n; ++t)
+      for (int c = 0; c < C; ++c) f.SxV[t * size_t(C) + size_t(c)] = tex.f[size_t(cut.m0)][size_t(c) * n + t];
+    const size_t rpd = fv.per_channel ? 1 : size_t(d.channels);
+    for (int v : cut.vs)
+      for (int l : cut.ls)
+        for (size_t r = 0; r < rpd; ++r) {
+          const size_t row = r + rpd * (size_t(l) + d.num_lights() * size_t(v));
+          f.U.insert(f.U.end(), bl.U + row * size_t(bl.C), bl.U + row * size_t(bl.C) + C);
+        }
+    blocks.push_back(std::move(f));
+  }
+  sd.width = int(std::max(1, d.width >> cut.m0)), sd.height = int(std::max(1, d.height >> cut.m0));
+  return make_fmf_model(sd, fv.bonn_color_model, std::move(blocks), fv.color_mean, fv.color_transform, fv.half);
+}
 
 extern const Exporter k_fmf_exporter;
 const Exporter k_fmf_exporter = {"fmf", &build, &emulate};
