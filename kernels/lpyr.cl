@@ -31,14 +31,35 @@ __kernel void lpyr_reduce(__global const float* src, int ys0, int w, int h, int 
 }
 
 /* F_k(x, y) -= F_{k+1}(x / 2, y / 2) (nearest-neighbour up-sampling) for rows [y0, y0 + rows)
-   of f; next holds rows of level k + 1 from yn0 on. One work-item per texel. */
+   of f (y0 even); next holds rows of level k + 1 from yn0 on. One work-item per parent texel:
+   its vector is loaded once and subtracted from its (up to) 2 x 2 children, so the parent level
+   is read once instead of four times (the kernel is memory-bound). */
 __kernel void lpyr_subtract_up(__global float* f, int w, int d, int y0, int rows, __global const float* next, int yn0) {
   int t = get_global_id(0);
-  if (t >= rows * w) return;
-  int x = t % w, y = y0 + t / w, w2 = (w + 1) / 2;
-  __global float* o = f + (size_t)t * d;
-  __global const float* s = next + ((size_t)(x / 2) + (size_t)w2 * (y / 2 - yn0)) * d;
+  int w2 = (w + 1) / 2, rows2 = (rows + 1) / 2;
+  if (t >= rows2 * w2) return;
+  int px = t % w2, py = t / w2;
+  int nx = min(2, w - 2 * px), ny = min(2, rows - 2 * py);
+  __global const float* s = next + ((size_t)px + (size_t)w2 * (y0 / 2 + py - yn0)) * d;
+  __global float* o = f + ((size_t)(2 * px) + (size_t)w * (2 * py)) * d;
+  size_t right = (size_t)d, down = (size_t)w * d;
   int r = 0;
-  for (; r + 16 <= d; r += 16) vstore16(vload16(0, o + r) - vload16(0, s + r), 0, o + r);
-  for (; r < d; ++r) o[r] -= s[r];
+  for (; r + 16 <= d; r += 16) {
+    float16 p = vload16(0, s + r);
+    vstore16(vload16(0, o + r) - p, 0, o + r);
+    if (nx > 1) vstore16(vload16(0, o + right + r) - p, 0, o + right + r);
+    if (ny > 1) {
+      vstore16(vload16(0, o + down + r) - p, 0, o + down + r);
+      if (nx > 1) vstore16(vload16(0, o + down + right + r) - p, 0, o + down + right + r);
+    }
+  }
+  for (; r < d; ++r) {
+    float p = s[r];
+    o[r] -= p;
+    if (nx > 1) o[right + r] -= p;
+    if (ny > 1) {
+      o[down + r] -= p;
+      if (nx > 1) o[down + right + r] -= p;
+    }
+  }
 }

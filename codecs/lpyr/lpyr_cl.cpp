@@ -96,7 +96,7 @@ Status subtract_up_tiles(float* f, int w, int h, size_t d, const float* next, in
     BTFC_RETURN_IF_ERROR(set_arg(k, a++, cl_int(rows)));
     BTFC_RETURN_IF_ERROR(set_arg(k, a++, nm));
     BTFC_RETURN_IF_ERROR(set_arg(k, a++, cl_int(yn0)));
-    const size_t global = size_t(rows) * size_t(w);
+    const size_t global = size_t((rows + 1) / 2) * size_t(w2);  // one work-item per parent texel
     BTFC_CL_CHECK(clEnqueueNDRangeKernel(queue, k, 1, nullptr, &global, nullptr, 0, nullptr, nullptr), "lpyr_subtract_up");
     BTFC_RETURN_IF_ERROR(fb.sync_to_host(queue, f_bytes));
     *done = y0 + rows;
