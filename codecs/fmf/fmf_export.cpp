@@ -81,32 +81,11 @@ void emulate(const ExportBundle& b, const ShaderQuery& q, float* rgb) {
   const GpuTexture& T = *b.find("eigen_texture");
   uv_texel(q.u, q.v, int(T.width), int(T.height), x, y);
   if (q.light >= 0) return measured(b, L, x, y, q.light, q.view, rgb);
-  const GpuTexture& I = *b.find("dir_index");
-  const GpuTexture& W = *b.find("dir_weight");
-  const int n = int(I.width);
-  int lx, ly, vx, vy;
-  direction_cell(q.wl, n, lx, ly);
-  direction_cell(q.wv, n, vx, vy);
-  const size_t la = (size_t(ly) * size_t(n) + size_t(lx)) * 4, va = ((size_t(n) + size_t(vy)) * size_t(n) + size_t(vx)) * 4;
-  float acc[3] = {0, 0, 0}, tmp[3];
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) {
-      const float w = W.f[0][la + size_t(i)] * W.f[0][va + size_t(j)];
-      if (w == 0) continue;
-      measured(b, L, x, y, int(I.u[0][la + size_t(i)]), int(I.u[0][va + size_t(j)]), tmp);
-      for (int c = 0; c < 3; ++c) acc[c] += w * tmp[c];
-    }
-  for (int c = 0; c < 3; ++c) rgb[c] = acc[c];
+  emulate_delaunay(b, q.wl, q.wv, [&](int l, int v, float* out) { measured(b, L, x, y, l, v, out); }, rgb);
 }
 
 std::string shader(const ExportBundle& b, const Layout& L) {
-  auto f = [](double v) {
-    char s[64];
-    std::snprintf(s, sizeof s, "%.9g", v);
-    std::string r = s;
-    if (r.find_first_of(".e") == std::string::npos) r += ".0";
-    return r;
-  };
+  const auto f = glsl_float;
   std::string s = "#version 300 es\n// btfc fmf reference shader: " + b.spec + "\n" +
                   "// rho(x, l, v) = sum_c U_c(l, v) SxV_c(x) (seed 000 section 4); 9-lookup Delaunay blend.\n"
                   "precision highp float;\nprecision highp int;\n"
@@ -146,18 +125,8 @@ std::string shader(const ExportBundle& b, const Layout& L) {
   }
   s += "  return c;\n}\n";
   s += "vec3 btf_eval_measured(vec2 uv, int light, int view) {\n  return fmf_measured(btfc_texel(uv, SIZE), light, view);\n}\n";
-  s += "vec3 btf_eval(vec2 uv, vec3 wl, vec3 wv) {\n"
-       "  ivec2 xy = btfc_texel(uv, SIZE);\n"
-       "  ivec2 cl = btfc_dir_cell(wl, DIR_N), cv = btfc_dir_cell(wv, DIR_N);\n"
-       "  uvec4 il = texelFetch(u_dir_index, ivec3(cl, 0), 0), iv = texelFetch(u_dir_index, ivec3(cv, 1), 0);\n"
-       "  vec4 al = texelFetch(u_dir_weight, ivec3(cl, 0), 0), av = texelFetch(u_dir_weight, ivec3(cv, 1), 0);\n"
-       "  vec3 acc = vec3(0.0);\n"
-       "  for (int i = 0; i < 3; ++i)\n"
-       "    for (int j = 0; j < 3; ++j) {\n"
-       "      float w = al[i] * av[j];\n"
-       "      if (w != 0.0) acc += w * fmf_measured(xy, int(il[i]), int(iv[j]));\n"
-       "    }\n"
-       "  return acc;\n}\n";
+  s += glsl_delaunay_function("vec3 btf_eval(vec2 uv, vec3 wl, vec3 wv)", "  ivec2 xy = btfc_texel(uv, SIZE);\n",
+                              "fmf_measured(xy, int(il[i]), int(iv[j]))");
   s += "#ifndef BTFC_NO_MAIN\nin vec2 v_uv;\nin vec3 v_wl;\nin vec3 v_wv;\nout vec4 btf_color;\n"
        "void main() { btf_color = vec4(btf_eval(v_uv, normalize(v_wl), normalize(v_wv)), 1.0); }\n#endif\n";
   return s;

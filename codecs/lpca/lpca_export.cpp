@@ -35,13 +35,7 @@ namespace {
 using lpca::LpcaModel;
 constexpr int k_prt_n = 16;
 
-std::string glf(double v) {
-  char s[64];
-  std::snprintf(s, sizeof s, "%.9g", v);
-  std::string r = s;
-  if (r.find_first_of(".en") == std::string::npos) r += ".0";
-  return r;
-}
+const auto glf = glsl_float;
 
 struct Layout {
   int C = 0, P = 0, nl = 0, nv = 0, nc = 0, dir_n = 0;
@@ -87,21 +81,7 @@ void emulate(const ExportBundle& b, const ShaderQuery& q, float* rgb) {
   int x, y;
   uv_texel(q.u, q.v, b.desc.width, b.desc.height, x, y);
   if (q.light >= 0) return measured(b, L, x, y, q.light, q.view, rgb);
-  const GpuTexture &I = *b.find("dir_index"), &W = *b.find("dir_weight");
-  const size_t n = size_t(L.dir_n);
-  int lx, ly, vx, vy;
-  direction_cell(q.wl, L.dir_n, lx, ly);
-  direction_cell(q.wv, L.dir_n, vx, vy);
-  const size_t la = (size_t(ly) * n + size_t(lx)) * 4, va = ((n + size_t(vy)) * n + size_t(vx)) * 4;
-  float acc[3] = {0, 0, 0}, tmp[3];
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) {
-      const float w = W.f[0][la + size_t(i)] * W.f[0][va + size_t(j)];
-      if (w == 0) continue;
-      measured(b, L, x, y, int(I.u[0][la + size_t(i)]), int(I.u[0][va + size_t(j)]), tmp);
-      for (int c = 0; c < 3; ++c) acc[c] += w * tmp[c];
-    }
-  std::copy(acc, acc + 3, rgb);
+  emulate_delaunay(b, q.wl, q.wv, [&](int l, int v, float* out) { measured(b, L, x, y, l, v, out); }, rgb);
 }
 
 }  // namespace
@@ -162,17 +142,8 @@ std::string shader(const ExportBundle& b, const Layout& L) {
        "      s += w[q] * texelFetch(u_eigen_brdfs, ivec3((1 + 4 * j + q) * NL + l, v, k), 0).rgb;\n"
        "  }\n  return s * CHANNELS;\n}\n";
   s += "vec3 btf_eval_measured(vec2 uv, int light, int view) { return lpca_measured(btfc_texel(uv, SIZE), light, view); }\n";
-  s += "vec3 btf_eval(vec2 uv, vec3 wl, vec3 wv) {  // Delaunay interpolation, 9 lookups\n"
-       "  ivec2 xy = btfc_texel(uv, SIZE);\n"
-       "  ivec2 cl = btfc_dir_cell(wl, DIR_N), cv = btfc_dir_cell(wv, DIR_N);\n"
-       "  uvec4 il = texelFetch(u_dir_index, ivec3(cl, 0), 0), iv = texelFetch(u_dir_index, ivec3(cv, 1), 0);\n"
-       "  vec4 al = texelFetch(u_dir_weight, ivec3(cl, 0), 0), av = texelFetch(u_dir_weight, ivec3(cv, 1), 0);\n"
-       "  vec3 acc = vec3(0.0);\n"
-       "  for (int i = 0; i < 3; ++i)\n"
-       "    for (int j = 0; j < 3; ++j) {\n"
-       "      float w = al[i] * av[j];\n"
-       "      if (w != 0.0) acc += w * lpca_measured(xy, int(il[i]), int(iv[j]));\n"
-       "    }\n  return acc;\n}\n";
+  s += glsl_delaunay_function("vec3 btf_eval(vec2 uv, vec3 wl, vec3 wv)", "  ivec2 xy = btfc_texel(uv, SIZE);\n",
+                              "lpca_measured(xy, int(il[i]), int(iv[j]))");
   if (L.prt) {
     s += "const vec2 PRT_SCALE = vec2(" + glf(L.prt_scale[0]) + ", " + glf(L.prt_scale[1]) + ");  // means, eigen-BRDFs\n";
     s += "vec3 lpca_prt(int k, int m, ivec2 i0, ivec2 i1, vec2 f) {  // bilinear, decoded before blending\n"

@@ -31,13 +31,7 @@ namespace {
 
 using lpyr::LpyrModel;
 
-std::string glf(double v) {
-  char s[64];
-  std::snprintf(s, sizeof s, "%.9g", v);
-  std::string r = s;
-  if (r.find_first_of(".en") == std::string::npos) r += ".0";
-  return r;
-}
+const auto glf = glsl_float;
 
 // The constants of the shader, as the manifest's "evaluation" lists them.
 struct Layout {
@@ -135,22 +129,10 @@ void lpyr_emulate(const ExportBundle& b, const ShaderQuery& q, float lod, LpyrRe
     ycc(b, L, x, y, l, v, lod, dirs, c);
     return to_rgb(L, c, rgb);
   }
-  const GpuTexture &I = *b.find("dir_index"), &W = *b.find("dir_weight");
-  const size_t n = size_t(L.dir_n);
-  int lx, ly, vx, vy;
-  direction_cell(q.wl, L.dir_n, lx, ly);
-  direction_cell(q.wv, L.dir_n, vx, vy);
-  const size_t la = (size_t(ly) * n + size_t(lx)) * 4, va = ((n + size_t(vy)) * n + size_t(vx)) * 4;
-  float acc[3] = {0, 0, 0}, tmp[3];
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) {
-      const float w = W.f[0][la + size_t(i)] * W.f[0][va + size_t(j)];
-      if (w == 0) continue;
-      ycc(b, L, x, y, int(I.u[0][la + size_t(i)]), int(I.u[0][va + size_t(j)]), lod, nullptr, c);
-      to_rgb(L, c, tmp);
-      for (int k = 0; k < 3; ++k) acc[k] += w * tmp[k];
-    }
-  std::copy(acc, acc + 3, rgb);
+  emulate_delaunay(b, q.wl, q.wv, [&](int l, int v, float* out) {
+    ycc(b, L, x, y, l, v, lod, nullptr, c);
+    to_rgb(L, c, out);
+  }, rgb);
 }
 
 namespace {
@@ -214,16 +196,8 @@ std::string shader(const ExportBundle& b, const Layout& L) {
        "  return min(float(LMAX), max(log2(max(footprint, 1e-30)), 0.0));\n}\n";
   s += "vec3 btf_eval_measured_lod(vec2 uv, int light, int view, float lod) {\n"
        "  return YCC_TO_RGB * lpyr_ycc(btfc_texel(uv, SIZE), light, view, clamp(lod, 0.0, float(LMAX)), false, vec3(0.0), vec3(0.0));\n}\n";
-  s += "vec3 btf_eval_lod(vec2 uv, vec3 wl, vec3 wv, float lod) {  // Delaunay interpolation, 9 lookups\n"
-       "  ivec2 cl = btfc_dir_cell(wl, DIR_N), cv = btfc_dir_cell(wv, DIR_N);\n"
-       "  uvec4 il = texelFetch(u_dir_index, ivec3(cl, 0), 0), iv = texelFetch(u_dir_index, ivec3(cv, 1), 0);\n"
-       "  vec4 al = texelFetch(u_dir_weight, ivec3(cl, 0), 0), av = texelFetch(u_dir_weight, ivec3(cv, 1), 0);\n"
-       "  vec3 acc = vec3(0.0);\n"
-       "  for (int i = 0; i < 3; ++i)\n"
-       "    for (int j = 0; j < 3; ++j) {\n"
-       "      float w = al[i] * av[j];\n"
-       "      if (w != 0.0) acc += w * btf_eval_measured_lod(uv, int(il[i]), int(iv[j]), lod);\n"
-       "    }\n  return acc;\n}\n";
+  s += glsl_delaunay_function("vec3 btf_eval_lod(vec2 uv, vec3 wl, vec3 wv, float lod)", "",
+                              "btf_eval_measured_lod(uv, int(il[i]), int(iv[j]), lod)");
   s += "vec3 btf_eval_nearest_lod(vec2 uv, vec3 wl, vec3 wv, float lod) {  // seed 001 section 3.4\n"
        "  int l = int(texelFetch(u_direction_lut, ivec3(btfc_dir_cell(wl, LUT_N), 0), 0).r);\n"
        "  int v = int(texelFetch(u_direction_lut, ivec3(btfc_dir_cell(wv, LUT_N), 1), 0).r);\n"

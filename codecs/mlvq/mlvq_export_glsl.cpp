@@ -18,13 +18,7 @@ constexpr float k_pi = 3.14159265358979f;
 constexpr const char* k_parts[3] = {"rgb", "lum", "chroma"};
 constexpr const char* k_swizzle = "xyzw";  // ivec4 node coordinate: level k at component k - 1
 
-std::string num(double v) {
-  char s[64];
-  std::snprintf(s, sizeof s, "%.9g", v);
-  std::string r = s;
-  if (r.find_first_of(".e") == std::string::npos) r += ".0";
-  return r;
-}
+const auto num = glsl_float;
 
 // ---- emulation side ----------------------------------------------------------------------------
 

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 #include "core/interp.h"
 
@@ -154,6 +155,47 @@ ivec2 btfc_dir_cell(vec3 d, int n) {
   return clamp(ivec2(floor((p * 0.5 + 0.5) * float(n))), ivec2(0), ivec2(n - 1));
 }
 )";
+}
+
+std::string glsl_float(double v) {
+  char s[64];
+  std::snprintf(s, sizeof s, "%.9g", v);
+  std::string r = s;
+  if (r.find_first_of(".en") == std::string::npos) r += ".0";  // "inf"/"nan" never occur: data are checked finite
+  return r;
+}
+
+std::string glsl_delaunay_function(const std::string& signature, const std::string& prologue, const std::string& measured_call) {
+  return signature + " {  // Delaunay interpolation, 9 lookups\n" + prologue +
+         "  ivec2 cl = btfc_dir_cell(wl, DIR_N), cv = btfc_dir_cell(wv, DIR_N);\n"
+         "  uvec4 il = texelFetch(u_dir_index, ivec3(cl, 0), 0), iv = texelFetch(u_dir_index, ivec3(cv, 1), 0);\n"
+         "  vec4 al = texelFetch(u_dir_weight, ivec3(cl, 0), 0), av = texelFetch(u_dir_weight, ivec3(cv, 1), 0);\n"
+         "  vec3 acc = vec3(0.0);\n"
+         "  for (int i = 0; i < 3; ++i)\n"
+         "    for (int j = 0; j < 3; ++j) {\n"
+         "      float w = al[i] * av[j];\n"
+         "      if (w != 0.0) acc += w * " + measured_call + ";\n"
+         "    }\n"
+         "  return acc;\n}\n";
+}
+
+void emulate_delaunay(const ExportBundle& b, const Vec3& wl, const Vec3& wv, const std::function<void(int l, int v, float* rgb)>& measured,
+                      float* rgb) {
+  const GpuTexture &I = *b.find("dir_index"), &W = *b.find("dir_weight");
+  const int n = int(I.width);
+  int lx, ly, vx, vy;
+  direction_cell(wl, n, lx, ly);
+  direction_cell(wv, n, vx, vy);
+  const size_t la = (size_t(ly) * size_t(n) + size_t(lx)) * 4, va = ((size_t(n) + size_t(vy)) * size_t(n) + size_t(vx)) * 4;
+  float acc[3] = {0, 0, 0}, tmp[3];
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      const float w = W.f[0][la + size_t(i)] * W.f[0][va + size_t(j)];
+      if (w == 0) continue;
+      measured(int(I.u[0][la + size_t(i)]), int(I.u[0][va + size_t(j)]), tmp);
+      for (int c = 0; c < 3; ++c) acc[c] += w * tmp[c];
+    }
+  std::copy(acc, acc + 3, rgb);
 }
 
 Result<std::pair<GpuTexture, GpuTexture>> direction_maps(const BtfDesc& desc, int n) {

@@ -100,6 +100,15 @@ Result<std::pair<GpuTexture, GpuTexture>> direction_maps(const BtfDesc& desc, in
 void direction_cell(const Vec3& d, int n, int& cx, int& cy);
 // GLSL shared by the shaders: btfc_texel(uv, size), btfc_dir_cell(dir, n).
 const char* glsl_common();
+// A float as a GLSL literal (9 significant digits, always with '.' or an exponent).
+std::string glsl_float(double v);
+// A GLSL function `signature` that blends `measured_call` (an expression using il[i] and iv[j],
+// the light / view indices) over the 3 x 3 Delaunay pairs of wl and wv read from u_dir_index /
+// u_dir_weight (DIR_N = their size): the 9-lookup interpolation every exporter's btf_eval uses.
+std::string glsl_delaunay_function(const std::string& signature, const std::string& prologue, const std::string& measured_call);
+// Its CPU emulation: the same blend of measured(l, v, rgb) from the bundle's direction maps.
+void emulate_delaunay(const ExportBundle& b, const Vec3& wl, const Vec3& wv, const std::function<void(int l, int v, float* rgb)>& measured,
+                      float* rgb);
 // uv -> texel (x, y) as the shader computes it.
 void uv_texel(float u, float v, int width, int height, int& x, int& y);
 // Direction tables for the manifest ([[x, y, z], ...]).
