@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <optional>
 #include <random>
 #include <omp.h>
 
@@ -13,6 +14,7 @@
 
 #include "codecs/fmf/svd.h"
 #include "codecs/lpca/lpca_cl.h"
+#include "core/blas_env.h"
 
 namespace btfc::lpca {
 namespace {
@@ -317,11 +319,15 @@ Result<FitResult> fit_local_pca(const Btf& btf, const FitOptions& opt) {
       return start[size_t(a) + 1] - start[size_t(a)] > start[size_t(b) + 1] - start[size_t(b)];
     });
     const bool outer = by_size.size() >= 2 * ws.size();
+    {
+      std::optional<SingleThreadedBlas> one_blas_thread;  // the OpenMP threads are the parallelism
+      if (outer) one_blas_thread.emplace();
 #pragma omp parallel for schedule(dynamic, 1) if (outer)
-    for (size_t j = 0; j < by_size.size(); ++j) {
-      const int k = by_size[j];
-      pca_step(X, order.data() + start[size_t(k)], start[size_t(k) + 1] - start[size_t(k)], c, omega,
-               ws[size_t(omp_get_thread_num())], cls[size_t(k)], weights, err);
+      for (size_t j = 0; j < by_size.size(); ++j) {
+        const int k = by_size[j];
+        pca_step(X, order.data() + start[size_t(k)], start[size_t(k) + 1] - start[size_t(k)], c, omega,
+                 ws[size_t(omp_get_thread_num())], cls[size_t(k)], weights, err);
+      }
     }
     res.sq_error.push_back(std::accumulate(err.begin(), err.end(), 0.0));
     if (opt.progress) opt.progress->advance();

@@ -7,6 +7,7 @@
 #include <limits>
 #include <omp.h>
 
+#include "core/blas_env.h"
 #include "core/cl_runtime.h"
 
 namespace btfc::lpca_cl {
@@ -64,10 +65,12 @@ int assign_reference(const AssignProblem& pr, uint32_t* assign, double* err) {
   const Eigen::Index d = pr.d, N = pr.N, M = Eigen::Index(pr.K) * (pr.c + 1);
   const Eigen::Map<const Eigen::MatrixXf> X(pr.X, d, N), W(pr.W, d, M);
   // Texel blocks in parallel, each block's GEMM single-threaded (Eigen does not nest inside an
-  // OpenMP region): one fork/join per step instead of Eigen's fine-grained GEMM synchronisation,
-  // which ran 3-15x slower than one thread when the 2-core machine was shared.
+  // OpenMP region; OpenBLAS is held to one thread, core/blas_env.h): one fork/join per step
+  // instead of fine-grained GEMM synchronisation, which ran 3-15x slower than one thread when
+  // the 2-core machine was shared.
   int moved = 0;
   const Eigen::Index tb = 512;
+  SingleThreadedBlas one_blas_thread;
 #pragma omp parallel reduction(+ : moved)
   {
     MatrixXfR P(tb, M);
