@@ -6,14 +6,15 @@
 //     ABRDFs (Johnson-Lindenstrauss: distances are preserved to ~25 %, enough for seeding; exact
 //     k-means++ would stream the whole BTF once per cluster). Every texel joins its nearest seed.
 //  2. Repeat up to `iters` times:
-//     a. PCA step, per cluster (clusters in parallel, largest first): mean + `components`
-//        eigen-BRDFs of the centered members. A subspace of width c + 8 comes from the float Gram
-//        matrix of the smaller side (eigen-decomposed in double) when that side is <= 384, else
-//        from one subspace iteration started from the previous basis (two from random vectors
-//        for a new cluster); Rayleigh-Ritz in double then gives the best rank-c basis in it.
-//        The previous basis, with the new mean, is scored in the same pass and kept when it
-//        reconstructs the members better, so this step never increases the error even though
-//        the subspace is approximate. The total squared error after this step is recorded.
+//     a. PCA step, per cluster (clusters in parallel, largest first; cluster_pca.h): mean +
+//        `components` eigen-BRDFs of the centered members. A subspace of width c + 8 comes from
+//        the float Gram matrix of the smaller side (eigen-decomposed in double) when that side
+//        is <= 384, else from one subspace iteration started from the previous basis (two from
+//        random vectors for a new cluster), streamed over the members in blocks; Rayleigh-Ritz
+//        in double then gives the best rank-c basis in it. The previous basis, with the new
+//        mean, is scored in the same pass and kept when it reconstructs the members better, so
+//        this step never increases the error even though the subspace is approximate. The total
+//        squared error after this step is recorded.
 //     b. Stop if this was the last iteration or the previous assignment step changed nothing.
 //     c. Assignment step: the error of texel x in cluster k is ||x - mu_k||^2 - ||E_k^T (x - mu_k)||^2
 //        (orthonormal E_k), computed for all k at once by one float GEMM per block of texels
