@@ -13,7 +13,7 @@
 #include <Eigen/Dense>
 
 #include "codecs/lpca/cluster_pca.h"
-#include "codecs/lpca/lpca_cl.h"
+#include "codecs/lpca/assign.h"
 #include "core/blas_env.h"
 
 namespace btfc::lpca {
@@ -98,29 +98,6 @@ void seed_clusters(const MapCF& X, int K, uint64_t seed, std::vector<uint32_t>& 
   }
 }
 
-// Assignment step (lpca_cl.h: the OpenCL kernels or their C++ reference); returns the number of
-// texels moved and fills `err` with the estimated error of each texel in its (new) cluster.
-Result<int> assign_step(const MapCF& X, const std::vector<ClusterBasis>& cls, int c, const std::vector<double>& x2,
-                        std::vector<uint32_t>& assign, std::vector<double>& err, MatF& Wm) {
-  const Index d = X.rows(), K = Index(cls.size()), cols = c + 1;
-  Wm.resize(d, K * cols);
-  Wm.setZero();
-  lpca_cl::AssignProblem pr;
-  pr.X = X.data(), pr.d = d, pr.N = X.cols(), pr.K = int(K), pr.c = c, pr.W = Wm.data(), pr.x2 = x2.data();
-  pr.margin = k_move_margin;
-  pr.mu2.assign(size_t(K), -1.0);  // -1: no basis, skipped
-  pr.muE.assign(size_t(K) * size_t(c), 0.0);
-  for (Index k = 0; k < K; ++k) {
-    if (!cls[size_t(k)].valid) continue;
-    Wm.col(k * cols) = cls[size_t(k)].mean;
-    Wm.middleCols(k * cols + 1, c) = cls[size_t(k)].E.transpose();
-    pr.mu2[size_t(k)] = cls[size_t(k)].mean.cast<double>().squaredNorm();
-    for (int i = 0; i < c; ++i)
-      pr.muE[size_t(k) * size_t(c) + size_t(i)] = cls[size_t(k)].E.row(i).cast<double>().dot(cls[size_t(k)].mean.cast<double>());
-  }
-  return lpca_cl::assign(pr, assign.data(), err.data());
-}
-
 }  // namespace
 
 Result<FitResult> fit_local_pca(const Btf& btf, const FitOptions& opt) {
@@ -145,7 +122,7 @@ Result<FitResult> fit_local_pca(const Btf& btf, const FitOptions& opt) {
   MatrixXfR weights = MatrixXfR::Zero(N, c);
   std::vector<PcaWorkspace> ws(static_cast<size_t>(omp_get_max_threads()));
   MatF omega;
-  MatF Wm;  // the assignment step's stacked [mu_k E_k^T], reused
+  AssignWorkspace aws;
   std::vector<Index> order(static_cast<size_t>(N));  // texels sorted by cluster (counting sort)
   std::vector<Index> start(size_t(K) + 1);
   const Index l_max = std::min<Index>(c + k_oversample, d);
@@ -164,7 +141,7 @@ Result<FitResult> fit_local_pca(const Btf& btf, const FitOptions& opt) {
     omega.resize(d, l_max);
     for (Index i = 0; i < omega.size(); ++i) omega.data()[i] = gauss(rng);
     // Clusters in parallel, largest first, each on its own workspace with single-threaded Eigen
-    // inside (see assign_step). With fewer clusters than 2 x threads, one at a time with
+    // inside (core/blas_env.h). With fewer clusters than 2 x threads, one at a time with
     // Eigen's own threading instead. Results do not depend on which thread ran a cluster.
     std::vector<int> by_size;
     for (int k = 0; k < K; ++k) {
@@ -189,7 +166,10 @@ Result<FitResult> fit_local_pca(const Btf& btf, const FitOptions& opt) {
     if (opt.progress) opt.progress->advance();
     if (it + 1 == opt.iters) break;
     const auto ta = std::chrono::steady_clock::now();
-    BTFC_ASSIGN_OR_RETURN(int moved, assign_step(X, cls, c, x2, assign, err, Wm));
+    BTFC_ASSIGN_OR_RETURN(AssignStats as, assign_step(X, cls, c, x2, weights, k_move_margin, opt.prune, assign, err, aws));
+    int moved = as.moved;
+    res.assign_scored += as.scored;
+    res.assign_exhaustive += as.exhaustive;
     res.assign_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - ta).count();
     moved += reseed_empty(assign, err, K, res.reseeded);
     res.changes.push_back(moved);

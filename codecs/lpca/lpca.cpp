@@ -259,6 +259,7 @@ class LpcaCodec final : public Codec {
     st.add("rel_error_estimate", std::sqrt(err / total));
     st.add("cluster_seconds", std::chrono::duration<double>(t1 - t0).count());
     st.add("assign_seconds", fit.assign_seconds);
+    if (fit.assign_exhaustive > 0) st.add("assign_scored_fraction", double(fit.assign_scored) / double(fit.assign_exhaustive));
     if (K < fo.clusters)
       st.note("clusters", std::to_string(fo.clusters - K) + " of " + std::to_string(fo.clusters) + " clusters stayed empty (fewer texels than clusters)");
     auto model = std::make_unique<LpcaModel>(d, p.canonical(), cfg, std::move(fit.cluster_of), std::move(fit.table), std::move(fit.weights),
