@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 
 #include <Eigen/Dense>
 
@@ -146,10 +147,41 @@ void streamed_subspace(const MapCF& X, const Index* members, Index n, int q, Pca
   }
 }
 
+// One streamed subspace iteration of a large cluster from its previous Ritz basis U, whose
+// projections the members already have (proj: raw <x, U_j>, from the previous step or, for
+// members that moved in, computed here first): Z = Xc^T U needs no pass, only Q = Xc Z does,
+// and that pass also sums the mean.
+void ritz_subspace(const MapCF& X, const Index* members, Index n, const MatF& U, MatrixXfR& proj, std::vector<uint8_t>& proj_ok,
+                   PcaWorkspace& ws, Eigen::Ref<MatF> Q) {
+  const Index d = X.rows(), l = Q.cols();
+  std::vector<Index> missing;
+  for (Index i = 0; i < n; ++i)
+    if (!proj_ok[size_t(members[i])]) missing.push_back(members[i]);
+  for_blocks(X, missing.data(), Index(missing.size()), ws, false, [&](Index i0, const MapCF& Xb) {
+    ws.G.noalias() = Xb.transpose() * U;
+    for (Index j = 0; j < Xb.cols(); ++j) proj.row(missing[size_t(i0 + j)]).head(l) = ws.G.row(j);
+  });
+  ws.Z.resize(n, l);
+  for (Index i = 0; i < n; ++i) ws.Z.row(i) = proj.row(members[i]).head(l);
+  const Eigen::RowVectorXf mean_proj = (ws.Z.cast<double>().colwise().sum() / double(n)).cast<float>();  // mu^T U
+  ws.Z.rowwise() -= mean_proj;
+  orthonormalize(ws.Z, ws.Zd);
+  const Eigen::RowVectorXf zsum = ws.Z.colwise().sum();
+  ws.acc.setZero(d);
+  Q.setZero();
+  for_blocks(X, members, n, ws, false, [&](Index i0, const MapCF& Xb) {
+    for (Index j = 0; j < Xb.cols(); ++j) ws.acc += Xb.col(j).cast<double>();
+    Q.noalias() += Xb * ws.Z.middleRows(i0, Xb.cols());
+  });
+  ws.mean = (ws.acc / double(n)).cast<float>();
+  Q.noalias() -= ws.mean * zsum;
+  orthonormalize(Q, ws.Zd);
+}
+
 }  // namespace
 
 void pca_step(const Eigen::Map<const Eigen::MatrixXf>& X, const Index* members, Index n, int c, const MatF& omega, PcaWorkspace& ws,
-              ClusterBasis& cl, MatrixXfR& weights, std::vector<double>& err) {
+              ClusterBasis& cl, MatrixXfR& weights, std::vector<double>& err, MatrixXfR& proj, std::vector<uint8_t>& proj_ok) {
   const Index d = X.rows(), s = std::min(d, n), l = std::min<Index>(c + k_oversample, s);
   const Index extra = cl.valid ? c : 0;
   ws.QB.resize(d, l + extra);
@@ -159,6 +191,8 @@ void pca_step(const Eigen::Map<const Eigen::MatrixXf>& X, const Index* members, 
   // 1. The subspace Q = QB.leftCols(l), and the mean.
   if (exact) {
     exact_subspace(X, members, n, l, ws, Q);
+  } else if (cl.valid && cl.U.cols() == l && proj.cols() >= l) {
+    ritz_subspace(X, members, n, cl.U, proj, proj_ok, ws, Q);
   } else {
     // Start: the previous basis and l - c random vectors (warm), or l random vectors (cold).
     const Index keep = cl.valid ? std::min<Index>(c, l) : 0;
@@ -184,10 +218,24 @@ void pca_step(const Eigen::Map<const Eigen::MatrixXf>& X, const Index* members, 
   top_eigenpairs(Wd.transpose() * Wd, l, lambda, V);
   Index kept = 0;  // components above the float-noise floor; the rest stay zero
   while (kept < std::min<Index>(c, l) && lambda(kept) > 0 && lambda(kept) > k_rel_lambda_floor * lambda(0)) ++kept;
+  // The Ritz basis U = Q V and the members' Ritz coordinates: the new basis is their top c; a
+  // large cluster keeps U (and the members' raw projections onto it) to start the next step.
+  const MatF U = Q * V.cast<float>();
+  const MatD WV = Wd * V;
   MatrixXfR E = MatrixXfR::Zero(c, d), W = MatrixXfR::Zero(n, c);
   if (kept) {
-    E.topRows(kept).noalias() = (Q * V.leftCols(kept).cast<float>()).transpose();
-    W.leftCols(kept) = (Wd * V.leftCols(kept)).cast<float>();
+    E.topRows(kept) = U.leftCols(kept).transpose();
+    W.leftCols(kept) = WV.leftCols(kept).cast<float>();
+  }
+  if (!exact && proj.cols() >= l && U.allFinite() && WV.allFinite()) {
+    const Eigen::RowVectorXd muU = ws.mean.transpose().cast<double>() * U.cast<double>();
+    for (Index i = 0; i < n; ++i) {
+      proj.row(members[i]).head(l) = (WV.row(i) + muU).cast<float>();
+      proj_ok[size_t(members[i])] = 1;
+    }
+    cl.U = U;
+  } else {
+    cl.U.resize(d, 0);
   }
   if (!E.allFinite() || !W.allFinite()) {  // defensive: never let a degenerate step poison the model
     E.setZero();

@@ -6,19 +6,23 @@
 // rank-c basis E within span(Q) and the members' weights.
 //  - Small clusters (n or d <= 384, or l = min(n, d)): Q exact from the Gram matrix of the smaller
 //    side, on a gathered copy of the members (<= 384 x 79 KB for Bonn-size ABRDFs).
-//  - Large clusters: subspace iteration from the previous basis plus l - c random vectors (one
-//    iteration; a new cluster: two from l random vectors), streaming the members in blocks of 64
-//    columns copied from the BTF, so no cluster-sized copy is written. Each pass reads the
-//    members once: Z = Xc^T Q and Q' = Xc Z are formed from the raw columns and the mean
-//    subtracted afterwards (Xc^T Q = X^T Q - 1 mu^T Q), so the mean comes from the first pass;
-//    only the final projection pass centers explicitly (its weights and errors are what is
-//    stored). Warm: 3 passes per step, where gather + 5 passes were before.
+//  - Large clusters: one subspace iteration per step, streaming the members in blocks of 64
+//    columns copied from the BTF (no cluster-sized copy is written). Its start is the previous
+//    step's l Ritz vectors U, whose projections the members already have: kept from that step's
+//    final pass (`proj`), computed first for members that moved in. So Z = Xc^T U costs no pass;
+//    Q' = Xc Z is formed from the raw columns (and sums the mean on the way), its mean share
+//    subtracted afterwards (Xc Z = X Z - mu 1^T Z); the final projection pass centers
+//    explicitly (its weights and errors are what is stored). 2 passes over the members per step,
+//    where gather + 5 passes were before. Without Ritz vectors (a new cluster, or one that was
+//    small): one iteration from the previous basis plus l - c random vectors, or two from l
+//    random vectors, each pass Z = Xc^T Q likewise from the raw columns.
 // Monotonicity: the previous basis, with the new mean, is scored in the final pass and kept when
 // it reconstructs the members better; the new mean is optimal for any basis. So a step never
 // increases the cluster's error, however approximate the subspace.
 // Deterministic: fixed block order and fixed-order sums, independent of the calling thread.
 #pragma once
 #include <Eigen/Core>
+#include <cstdint>
 #include <vector>
 
 #include "core/btf.h"
@@ -32,6 +36,7 @@ constexpr int k_oversample = 8;  // subspace width l = c + k_oversample (Halko e
 struct ClusterBasis {
   Eigen::VectorXf mean;  // d
   MatrixXfR E;           // c x d, orthonormal rows (or zero rows past the data's rank)
+  Eigen::MatrixXf U;     // d x l Ritz basis of the last step (large clusters only, else no columns)
   bool valid = false;    // has a basis (a PCA step ran on >= 1 member)
 };
 
@@ -51,8 +56,11 @@ struct PcaWorkspace {
 // X: the BTF as d x N, column-major (core/btf.h). members: n >= 1 distinct texel indices,
 // ascending (runs of consecutive texels are then read in place). omega: d x >= l Gaussian start
 // vectors shared by all clusters of an iteration. Writes weights.row(t) (c values) and err[t]
-// for every member t and updates cl.
+// for every member t and updates cl. proj (N x (c + k_oversample)) and proj_ok (N) carry each
+// texel's raw projections onto its cluster's U between steps: the caller clears proj_ok[t]
+// when t changes cluster.
 void pca_step(const Eigen::Map<const Eigen::MatrixXf>& X, const Eigen::Index* members, Eigen::Index n, int c, const Eigen::MatrixXf& omega,
-              PcaWorkspace& ws, ClusterBasis& cl, MatrixXfR& weights, std::vector<double>& err);
+              PcaWorkspace& ws, ClusterBasis& cl, MatrixXfR& weights, std::vector<double>& err, MatrixXfR& proj,
+              std::vector<uint8_t>& proj_ok);
 
 }  // namespace btfc::lpca

@@ -123,6 +123,9 @@ Result<FitResult> fit_local_pca(const Btf& btf, const FitOptions& opt) {
   std::vector<PcaWorkspace> ws(static_cast<size_t>(omp_get_max_threads()));
   MatF omega;
   AssignWorkspace aws;
+  std::vector<uint32_t> prev_assign;
+  MatrixXfR proj(N, c + k_oversample);  // raw projections onto the texel's cluster's Ritz basis (cluster_pca.h)
+  std::vector<uint8_t> proj_ok(static_cast<size_t>(N), 0);
   std::vector<Index> order(static_cast<size_t>(N));  // texels sorted by cluster (counting sort)
   std::vector<Index> start(size_t(K) + 1);
   const Index l_max = std::min<Index>(c + k_oversample, d);
@@ -159,19 +162,22 @@ Result<FitResult> fit_local_pca(const Btf& btf, const FitOptions& opt) {
       for (size_t j = 0; j < by_size.size(); ++j) {
         const int k = by_size[j];
         pca_step(X, order.data() + start[size_t(k)], start[size_t(k) + 1] - start[size_t(k)], c, omega,
-                 ws[size_t(omp_get_thread_num())], cls[size_t(k)], weights, err);
+                 ws[size_t(omp_get_thread_num())], cls[size_t(k)], weights, err, proj, proj_ok);
       }
     }
     res.sq_error.push_back(std::accumulate(err.begin(), err.end(), 0.0));
     if (opt.progress) opt.progress->advance();
     if (it + 1 == opt.iters) break;
     const auto ta = std::chrono::steady_clock::now();
+    prev_assign = assign;
     BTFC_ASSIGN_OR_RETURN(AssignStats as, assign_step(X, cls, c, x2, weights, k_move_margin, opt.prune, assign, err, aws));
     int moved = as.moved;
     res.assign_scored += as.scored;
     res.assign_exhaustive += as.exhaustive;
     res.assign_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - ta).count();
     moved += reseed_empty(assign, err, K, res.reseeded);
+    for (Index t = 0; t < N; ++t)
+      if (assign[size_t(t)] != prev_assign[size_t(t)]) proj_ok[size_t(t)] = 0;  // projections onto the old cluster's U
     res.changes.push_back(moved);
     if (moved == 0) {
       res.converged = true;

@@ -9,9 +9,9 @@
 //     a. PCA step, per cluster (clusters in parallel, largest first; cluster_pca.h): mean +
 //        `components` eigen-BRDFs of the centered members. A subspace of width c + 8 comes from
 //        the float Gram matrix of the smaller side (eigen-decomposed in double) when that side
-//        is <= 384, else from one subspace iteration started from the previous basis (two from
-//        random vectors for a new cluster), streamed over the members in blocks; Rayleigh-Ritz
-//        in double then gives the best rank-c basis in it. The previous basis, with the new
+//        is <= 384, else from one subspace iteration started from the previous step's Ritz
+//        vectors (two from random vectors for a new cluster), streamed over the members in
+//        blocks; Rayleigh-Ritz in double then gives the best rank-c basis in it. The previous basis, with the new
 //        mean, is scored in the same pass and kept when it reconstructs the members better, so
 //        this step never increases the error even though the subspace is approximate. The total
 //        squared error after this step is recorded.
