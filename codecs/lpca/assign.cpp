@@ -6,6 +6,8 @@
 #include <limits>
 #include <numeric>
 
+#include "core/blas_env.h"
+
 namespace btfc::lpca {
 namespace {
 
@@ -28,6 +30,7 @@ void find_candidates(const std::vector<ClusterBasis>& cls, int c, const std::vec
     const Eigen::MatrixXd Wd = ws.W.cast<double>();
     G.noalias() = Wd.transpose() * Wd;
   }
+  SingleThreadedBlas one_blas_thread;  // the per-texel products below run inside OpenMP threads
 #pragma omp parallel
   {
     Eigen::VectorXd w(c), y(M);
