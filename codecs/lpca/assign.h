@@ -13,7 +13,8 @@
 // dist(p, A_k)^2 = ||p - mu_k||^2 - ||E_k (p - mu_k)||^2 costs O(c) per (texel, cluster) after
 // one M x c product per texel. Slack of margin (||x||^2 + ||mu_k||^2) on both sides covers
 // rounding (G is exact for the stored float vectors; E_k is orthonormal to float precision). On
-// the synthetic BTFs 2.5-6 of 31 other clusters per texel survive (more in the first steps).
+// the synthetic BTFs 2.5-6 of 31 other clusters per texel survive (more in the first steps); at
+// 256^2 texels and 32 x 8, 23 % of the (texel, cluster) pairs are scored, group unions included.
 //
 // Scoring. Survivors are scored as the exhaustive step scored every cluster: projections in
 // float (lpca_cl.h: kernel lpca_project or its C++ reference), error in double. Per range of
