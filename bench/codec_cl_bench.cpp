@@ -1,10 +1,11 @@
 // lpca and lpyr OpenCL kernels on PoCL against their C++ references (docs/benchmarks.md), in
 // one run so the ratios are meaningful on a noisy machine.
 //
-//   bench_cl_codecs [--texels 8192] [--clusters 32] [--components 8] [--side 128]
-// lpca assignment: random texels of UBO2003 size (81 x 81 x 3 = 19683 values), K clusters of
-// c orthonormal eigen-BRDFs; the reference is the codec's CPU path (one float GEMM per texel
-// block through Eigen / OpenBLAS, selection in double). lpca relighting: 256 x 256 texels.
+//   bench_cl_codecs [--texels 8192] [--clusters 32] [--components 8] [--candidates 6] [--side 128]
+// lpca assignment: projections of texels of UBO2003 size (81 x 81 x 3 = 19683 values) in groups
+// of 8, each group against `candidates` of the K clusters' c + 1 vectors (the pruned step scores
+// ~2.5-7 of 31); the reference is the codec's CPU path (the same loops in C++). lpca
+// relighting: 256 x 256 texels.
 // lpyr: one reduce + subtract_up of a side x side level with 81 x 81 values per texel.
 #include <Eigen/Core>
 #include <chrono>
@@ -38,13 +39,14 @@ static void report(const char* name, double t_cl, double t_ref, double units, co
 }
 
 int main(int argc, char** argv) {
-  int N = 8192, K = 32, c = 8, side = 128;
+  int N = 8192, K = 32, c = 8, side = 128, cand = 6;
   for (int i = 1; i + 1 < argc; i += 2) {
     std::string a = argv[i];
     if (a == "--texels") N = std::atoi(argv[i + 1]);
     else if (a == "--clusters") K = std::atoi(argv[i + 1]);
     else if (a == "--components") c = std::atoi(argv[i + 1]);
     else if (a == "--side") side = std::atoi(argv[i + 1]);
+    else if (a == "--candidates") cand = std::atoi(argv[i + 1]);
   }
   auto rt = ocl::Runtime::get();
   if (!rt.ok()) {
@@ -55,26 +57,29 @@ int main(int argc, char** argv) {
   std::mt19937 rng(1);
   std::uniform_real_distribution<float> u(0, 1);
 
-  {  // lpca assignment step
+  {  // lpca assignment step: groups of 8 texels, each scored against `cand` candidate clusters
     const int d = 81 * 81 * 3, M = K * (c + 1);
     std::vector<float> X(size_t(d) * N), W(size_t(d) * M);
 #pragma omp parallel for schedule(static)
     for (size_t i = 0; i < X.size(); ++i) X[i] = float((i * 2654435761u) % 1000) * 1e-3f;
     for (float& w : W) w = u(rng) - 0.5f;
-    std::vector<double> x2(static_cast<size_t>(N));
-    for (int t = 0; t < N; ++t) x2[size_t(t)] = Eigen::Map<const Eigen::VectorXf>(X.data() + size_t(t) * d, d).cast<double>().squaredNorm();
-    lpca_cl::AssignProblem p;
-    p.X = X.data(), p.d = d, p.N = N, p.K = K, p.c = c, p.W = W.data(), p.x2 = x2.data();
-    p.mu2.assign(size_t(K), 1.0);
-    p.muE.assign(size_t(K) * c, 0.0);
-    std::vector<uint32_t> a(size_t(N), 0);
-    std::vector<double> e(static_cast<size_t>(N));
-    (void)lpca_cl::assign_cl(p, a.data(), e.data());  // warm-up: program build
-    const double tc = best_of(3, [&] { std::fill(a.begin(), a.end(), 0u), (void)lpca_cl::assign_cl(p, a.data(), e.data()); });
-    const double tr = best_of(3, [&] { std::fill(a.begin(), a.end(), 0u), lpca_cl::assign_reference(p, a.data(), e.data()); });
-    std::printf("lpca assignment: %d texels x %d values, %d clusters x (%d + 1) vectors = %.1f GFLOP per step\n", N, d, K, c,
-                2.0 * N * d * M / 1e9);
-    report("lpca_project+select", tc, tr, 2.0 * N * d * M / 1e9, "GFLOP");
+    lpca_cl::ProjectionTable table;
+    lpca_cl::fill_projection_table(W.data(), d, K, c, table);
+    lpca_cl::GroupBatch b;
+    b.X = X.data(), b.nt = N;
+    b.cand_off.push_back(0);
+    for (int g = 0; g < N / 8; ++g) {  // texels scattered over the range, as the codec's sorted groups are
+      for (int i = 0; i < 8; ++i) b.texels.push_back(uint32_t((size_t(g) * 8 + size_t(i)) * 2654435761u % size_t(N)));
+      for (int j = 0; j < cand; ++j) b.cand.push_back(uint32_t((g + j * 7) % K));
+      b.cand_off.push_back(uint32_t(b.cand.size()));
+    }
+    std::vector<float> P(b.cand.size() * 8 * size_t(table.V));
+    (void)lpca_cl::project_cl(table, b, P.data());  // warm-up: program build
+    const double tc = best_of(3, [&] { (void)lpca_cl::project_cl(table, b, P.data()); });
+    const double tr = best_of(3, [&] { lpca_cl::project_reference(table, b, P.data()); });
+    const double gflop = 2.0 * double(N / 8 * 8) * d * cand * (c + 1) / 1e9;
+    std::printf("lpca assignment: %d texels x %d values, %d of %d clusters x (%d + 1) vectors each = %.1f GFLOP\n", N, d, cand, K, c, gflop);
+    report("lpca_project", tc, tr, gflop, "GFLOP");
   }
   {  // lpca relighting of a 256 x 256 image
     const size_t n = 65536, rows = size_t(K) * (c + 1);

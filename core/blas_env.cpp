@@ -4,7 +4,27 @@
 
 #include <cstdlib>
 
+#if defined(BTFC_HAVE_OPENBLAS)
+extern "C" {
+int openblas_get_num_threads(void);
+void openblas_set_num_threads(int);
+}
+#endif
+
 namespace btfc {
+
+SingleThreadedBlas::SingleThreadedBlas() {
+#if defined(BTFC_HAVE_OPENBLAS)
+  saved_ = openblas_get_num_threads();
+  if (saved_ > 1) openblas_set_num_threads(1);
+#endif
+}
+
+SingleThreadedBlas::~SingleThreadedBlas() {
+#if defined(BTFC_HAVE_OPENBLAS)
+  if (saved_ > 1) openblas_set_num_threads(saved_);
+#endif
+}
 
 void reexec_for_openblas(int argc, char** argv) {
 #if defined(BTFC_HAVE_OPENBLAS) && defined(__x86_64__)

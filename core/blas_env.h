@@ -9,4 +9,21 @@ namespace btfc {
 // Call first thing in main(). Returns normally when nothing is to be done or exec fails.
 void reexec_for_openblas(int argc, char** argv);
 
+// OpenBLAS (the pthreads build Debian ships) knows nothing of OpenMP: a GEMM called from inside
+// an OpenMP parallel region still hands work to its own thread pool, whose threads then spin
+// (sched_yield) against the OpenMP threads for the same 2 cores. Measured on lpca's per-cluster
+// PCA steps (128^2 texels, load ~9): 2.2x slower than with one BLAS thread per caller. Hold one of
+// these around parallel regions whose threads call BLAS. Process-wide (OpenBLAS has one
+// setting), restored on destruction; a no-op without OpenBLAS.
+class SingleThreadedBlas {
+ public:
+  SingleThreadedBlas();
+  ~SingleThreadedBlas();
+  SingleThreadedBlas(const SingleThreadedBlas&) = delete;
+  SingleThreadedBlas& operator=(const SingleThreadedBlas&) = delete;
+
+ private:
+  int saved_ = 0;
+};
+
 }  // namespace btfc

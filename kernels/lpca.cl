@@ -1,92 +1,72 @@
 /* lpca kernels (codecs/lpca/lpca_cl.h is the host side, its *_reference functions the C++ truth).
    Written CPU-style for PoCL (toolchain.md 3): straight loops, float16 vectors, register
    blocking, no local memory and no barriers. */
-#pragma OPENCL EXTENSION cl_khr_fp64 : enable
 
-/* Assignment step, part 1 (clustering.h step c): projections of a block of texels onto every
-   cluster's mean and eigen-BRDFs, P[t][m] (+)= sum_{r0 <= r < r0 + rc} X[t][r] W[r][m].
-   Ws holds W in strips of 16 projection vectors, [strip][r][16], so a strip's rows stream
-   contiguously; X is texel-major (texel t at X + t d). The host runs one launch per chunk of
-   rc directions so the chunk of Ws (rc x Mp floats) stays in the core's cache while every
-   texel group passes over it; P carries the partial sums between chunks (first = overwrite).
-   A work-item owns 8 texels: each float16 load of Ws feeds 8 FMAs (register blocking). */
-__kernel void lpca_project(__global const float* X, int d, __global const float* Ws, int strips, int r0, int rc, int n,
-                           int first, __global float* P) {
-  int t0 = get_global_id(0) * 8;
-  if (t0 >= n) return;
-  int Mp = strips * 16;
-  if (t0 + 8 <= n) {
-    __global const float* x = X + (size_t)t0 * d + r0;
-    for (int s = 0; s < strips; ++s) {
-      __global float* p = P + (size_t)t0 * Mp + s * 16;
-      float16 a0 = (float16)(0.0f), a1 = a0, a2 = a0, a3 = a0, a4 = a0, a5 = a0, a6 = a0, a7 = a0;
-      if (!first) {
-        a0 = vload16(0, p), a1 = vload16(0, p + Mp), a2 = vload16(0, p + 2 * Mp), a3 = vload16(0, p + 3 * Mp);
-        a4 = vload16(0, p + 4 * Mp), a5 = vload16(0, p + 5 * Mp), a6 = vload16(0, p + 6 * Mp), a7 = vload16(0, p + 7 * Mp);
-      }
-      __global const float* w = Ws + ((size_t)s * d + r0) * 16;
-      for (int r = 0; r < rc; ++r) {
-        float16 wv = vload16(r, w);
-        a0 = mad((float16)(x[r]), wv, a0);
-        a1 = mad((float16)(x[d + r]), wv, a1);
-        a2 = mad((float16)(x[2 * d + r]), wv, a2);
-        a3 = mad((float16)(x[3 * d + r]), wv, a3);
-        a4 = mad((float16)(x[4 * d + r]), wv, a4);
-        a5 = mad((float16)(x[5 * d + r]), wv, a5);
-        a6 = mad((float16)(x[6 * d + r]), wv, a6);
-        a7 = mad((float16)(x[7 * d + r]), wv, a7);
-      }
-      vstore16(a0, 0, p), vstore16(a1, 0, p + Mp), vstore16(a2, 0, p + 2 * Mp), vstore16(a3, 0, p + 3 * Mp);
-      vstore16(a4, 0, p + 4 * Mp), vstore16(a5, 0, p + 5 * Mp), vstore16(a6, 0, p + 6 * Mp), vstore16(a7, 0, p + 7 * Mp);
-    }
-    return;
-  }
-  for (int t = t0; t < n; ++t) {  // the block's last, partial group of texels
-    __global const float* x = X + (size_t)t * d + r0;
-    for (int s = 0; s < strips; ++s) {
-      __global float* p = P + (size_t)t * Mp + s * 16;
-      float16 a = first ? (float16)(0.0f) : vload16(0, p);
-      __global const float* w = Ws + ((size_t)s * d + r0) * 16;
-      for (int r = 0; r < rc; ++r) a = mad((float16)(x[r]), vload16(r, w), a);
-      vstore16(a, 0, p);
-    }
-  }
+/* Sum of the 16 lanes. */
+inline float hsum16(float16 v) {
+  float8 a = v.lo + v.hi;
+  float4 b = a.lo + a.hi;
+  float2 c = b.lo + b.hi;
+  return c.x + c.y;
 }
 
-/* Assignment step, part 2: per texel, the reconstruction error in every valid cluster k,
-     e_k = ||x||^2 - 2 <x, mu_k> + ||mu_k||^2 - sum_j (<x, E_kj> - <mu_k, E_kj>)^2,
-   in double (a difference of large terms), and the best cluster. The texel moves only when the
-   best beats its current cluster by more than margin (||x||^2 + ||mu_best||^2): float rounding
-   of P must not make the assignment oscillate. P row t: K groups of (c + 1) projections. */
-__kernel void lpca_select(__global const float* P, int Mp, int K, int c, __global const double* mu2,
-                          __global const double* muE, __global const double* x2, double margin, int n,
-                          __global uint* assign, __global double* err, __global int* moved) {
-  int t = get_global_id(0);
-  if (t >= n) return;
-  __global const float* p = P + (size_t)t * Mp;
-  uint cur = assign[t], best_k = cur;
-  double best = INFINITY, cur_e = INFINITY, xx = x2[t];
-  for (int k = 0; k < K; ++k) {
-    double m2 = mu2[k];
-    if (m2 < 0) continue;  /* invalid cluster */
-    double e = xx - 2.0 * (double)p[k * (c + 1)] + m2;
-    for (int j = 0; j < c; ++j) {
-      double q = (double)p[k * (c + 1) + 1 + j] - muE[k * c + j];
-      e -= q * q;
+#define LPCA_ROW(i, xp)           \
+  x = vload16(0, xp + r);         \
+  a##i##0 = mad(x, v0, a##i##0); \
+  a##i##1 = mad(x, v1, a##i##1); \
+  a##i##2 = mad(x, v2, a##i##2);
+
+#define LPCA_STORE(i, xp)                                                                              \
+  {                                                                                                    \
+    float s0 = hsum16(a##i##0), s1 = hsum16(a##i##1), s2 = hsum16(a##i##2);                          \
+    for (int t = r16; t < rc; ++t) s0 = mad(xp[t], w0[t], s0), s1 = mad(xp[t], w1[t], s1), s2 = mad(xp[t], w2[t], s2); \
+    __global float* q = o + (i) * V + j;                                                               \
+    if (first) q[0] = s0, q[1] = s1, q[2] = s2;                                                        \
+    else q[0] += s0, q[1] += s1, q[2] += s2;                                                           \
+  }
+
+/* Assignment step (clustering.h step c, codecs/lpca/assign.h): projections of groups of 8
+   texels onto their candidate clusters' mean and eigen-BRDFs,
+     P[(p * 8 + i) * V + j] (+)= sum_{r0 <= r < r0 + rc} X[texels[8 g + i]][r] Wt[k][j][r]
+   for every pair p of group g (cand_off[g] <= p < cand_off[g + 1], k = cand[p]) and j < V.
+   Wt holds each cluster's V vectors (c + 1 padded with zero vectors to a multiple of 3) as
+   contiguous rows of d values; X is texel-major. Lanes run along the directions: a work-item
+   keeps 8 texels x 3 vectors of float16 partial dot products in registers, so 11 loads feed 24
+   FMAs and no lane is padding; the host runs one launch per chunk of rc directions, so a group's
+   8 texel chunks stay in L1 across its candidates and the clusters' chunks in L2. */
+__kernel void lpca_project(__global const float* X, int d, __global const uint* texels, __global const uint* cand_off,
+                           __global const uint* cand, __global const float* Wt, int V, int r0, int rc, int groups, int first,
+                           __global float* P) {
+  int g = get_global_id(0);
+  if (g >= groups) return;
+  __global const uint* tx = texels + (size_t)g * 8;
+  __global const float* x0 = X + (size_t)tx[0] * d + r0;
+  __global const float* x1 = X + (size_t)tx[1] * d + r0;
+  __global const float* x2 = X + (size_t)tx[2] * d + r0;
+  __global const float* x3 = X + (size_t)tx[3] * d + r0;
+  __global const float* x4 = X + (size_t)tx[4] * d + r0;
+  __global const float* x5 = X + (size_t)tx[5] * d + r0;
+  __global const float* x6 = X + (size_t)tx[6] * d + r0;
+  __global const float* x7 = X + (size_t)tx[7] * d + r0;
+  int r16 = rc & ~15;
+  for (uint p = cand_off[g]; p < cand_off[g + 1]; ++p) {
+    __global float* o = P + (size_t)p * 8 * V;
+    for (int j = 0; j < V; j += 3) {
+      __global const float* w0 = Wt + ((size_t)cand[p] * V + j) * d + r0;
+      __global const float* w1 = w0 + d;
+      __global const float* w2 = w1 + d;
+      float16 z = (float16)(0.0f), x;
+      float16 a00 = z, a01 = z, a02 = z, a10 = z, a11 = z, a12 = z, a20 = z, a21 = z, a22 = z, a30 = z, a31 = z, a32 = z;
+      float16 a40 = z, a41 = z, a42 = z, a50 = z, a51 = z, a52 = z, a60 = z, a61 = z, a62 = z, a70 = z, a71 = z, a72 = z;
+      for (int r = 0; r < r16; r += 16) {
+        float16 v0 = vload16(0, w0 + r), v1 = vload16(0, w1 + r), v2 = vload16(0, w2 + r);
+        LPCA_ROW(0, x0) LPCA_ROW(1, x1) LPCA_ROW(2, x2) LPCA_ROW(3, x3)
+        LPCA_ROW(4, x4) LPCA_ROW(5, x5) LPCA_ROW(6, x6) LPCA_ROW(7, x7)
+      }
+      LPCA_STORE(0, x0) LPCA_STORE(1, x1) LPCA_STORE(2, x2) LPCA_STORE(3, x3)
+      LPCA_STORE(4, x4) LPCA_STORE(5, x5) LPCA_STORE(6, x6) LPCA_STORE(7, x7)
     }
-    e = max(0.0, e);
-    if ((uint)k == cur) cur_e = e;
-    if (e < best) best = e, best_k = (uint)k;
   }
-  int mv = 0;
-  if (best_k != cur && best < cur_e - margin * (xx + mu2[best_k])) {
-    assign[t] = best_k;
-    err[t] = best;
-    mv = 1;
-  } else {
-    err[t] = isfinite(cur_e) ? cur_e : best;
-  }
-  moved[t] = mv;
 }
 
 /* Relighting (seed 002 eq. 2-3, codecs/lpca/relight.cpp): radiance of texel t for one view and

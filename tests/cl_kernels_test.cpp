@@ -167,74 +167,72 @@ TEST(OpenCLKernels, FmfModelCoherentBatchMatchesCpuPath) {
 
 namespace {
 
-struct AssignCase {
+struct ProjectCase {
   std::vector<float> X, W;
-  std::vector<double> x2;
-  lpca_cl::AssignProblem p;
+  lpca_cl::ProjectionTable table;
+  lpca_cl::GroupBatch batch;
+  int d = 0, c = 0;
 };
 
-// Clusters around K random centres with orthonormal bases; cluster 1 has no basis (skipped).
-AssignCase make_assign_case(int d, int N, int K, int c, unsigned seed) {
-  AssignCase a;
+// Random texels and vectors; `groups` groups of 8 random texels (repeats included, as in short
+// groups), each with a random ascending set of 1..K candidate clusters.
+ProjectCase make_project_case(int d, int nt, int K, int c, int groups, unsigned seed) {
+  ProjectCase pc;
+  pc.d = d, pc.c = c;
   std::mt19937 rng(seed);
   std::normal_distribution<float> g(0, 1);
-  const int M = K * (c + 1);
-  a.W.assign(size_t(d) * M, 0.f);
-  a.p.mu2.assign(size_t(K), -1.0);
-  a.p.muE.assign(size_t(K) * c, 0.0);
-  for (int k = 0; k < K; ++k) {
-    Eigen::MatrixXf B(d, c + 1);
-    for (int i = 0; i < B.size(); ++i) B.data()[i] = g(rng);
-    Eigen::HouseholderQR<Eigen::MatrixXf> qr(B.rightCols(c));
-    Eigen::MatrixXf E = qr.householderQ() * Eigen::MatrixXf::Identity(d, c);
-    Eigen::Map<Eigen::MatrixXf> Wk(a.W.data() + size_t(k) * (c + 1) * d, d, c + 1);
-    if (k == 1) continue;
-    Wk.col(0) = B.col(0);
-    Wk.rightCols(c) = E;
-    a.p.mu2[size_t(k)] = B.col(0).cast<double>().squaredNorm();
-    for (int j = 0; j < c; ++j) a.p.muE[size_t(k) * c + j] = E.col(j).cast<double>().dot(B.col(0).cast<double>());
+  pc.X.resize(size_t(d) * nt);
+  for (float& x : pc.X) x = 1.0f + g(rng);  // an offset, as ABRDFs have: sums of one sign
+  pc.W.resize(size_t(d) * K * (c + 1));
+  for (float& w : pc.W) w = g(rng);
+  lpca_cl::fill_projection_table(pc.W.data(), d, K, c, pc.table);
+  pc.batch.X = pc.X.data(), pc.batch.nt = nt;
+  pc.batch.cand_off.push_back(0);
+  for (int gi = 0; gi < groups; ++gi) {
+    for (int i = 0; i < 8; ++i) pc.batch.texels.push_back(uint32_t(rng() % nt));
+    const size_t before = pc.batch.cand.size();
+    const int want = 1 + int(rng() % K);
+    for (int k = 0; k < K; ++k)
+      if (int(rng() % K) < want) pc.batch.cand.push_back(uint32_t(k));
+    if (pc.batch.cand.size() == before) pc.batch.cand.push_back(uint32_t(rng() % K));
+    pc.batch.cand_off.push_back(uint32_t(pc.batch.cand.size()));
   }
-  a.X.resize(size_t(d) * N);
-  a.x2.resize(size_t(N));
-  for (int t = 0; t < N; ++t) {
-    const int k = int(rng() % K);
-    for (int r = 0; r < d; ++r) a.X[size_t(t) * d + r] = a.W[size_t(k) * (c + 1) * d + r] + 0.5f * g(rng);
-    a.x2[size_t(t)] = Eigen::Map<const Eigen::VectorXf>(a.X.data() + size_t(t) * d, d).cast<double>().squaredNorm();
-  }
-  a.p.X = a.X.data(), a.p.d = d, a.p.N = N, a.p.K = K, a.p.c = c, a.p.W = a.W.data(), a.p.x2 = a.x2.data();
-  return a;
+  return pc;
 }
 
 }  // namespace
 
-TEST(OpenCLKernels, LpcaAssignKernelMatchesReference) {
+TEST(OpenCLKernels, LpcaProjectKernelMatchesReference) {
   REQUIRE_CL();
-  // d not a multiple of 16 or of the kernel's 1024-direction chunk; N not a multiple of 8;
-  // K (c + 1) not a multiple of 16; c = 0 would be rejected by the codec, so c >= 1.
+  // d not a multiple of 16 or of the 1024-direction chunk (2500: three chunks); c + 1 below, at
+  // and above one strip of 16 (S = 2); one group and many.
   struct S {
-    int d, N, K, c;
+    int d, nt, K, c, groups;
   };
-  for (S s : {S{37, 1003, 5, 3}, S{2500, 333, 7, 2}, S{19, 7, 2, 1}, S{1, 9, 3, 1}}) {
-    AssignCase a = make_assign_case(s.d, s.N, s.K, s.c, unsigned(s.d + s.N));
-    std::vector<uint32_t> init(size_t(s.N));
-    std::mt19937 rng(5);
-    for (auto& v : init) v = uint32_t(rng() % s.K);
-    std::vector<uint32_t> ra = init, ca = init;
-    std::vector<double> re(size_t(s.N)), ce(size_t(s.N));
-    const int rm = lpca_cl::assign_reference(a.p, ra.data(), re.data());
-    auto cm = lpca_cl::assign_cl(a.p, ca.data(), ce.data());
-    ASSERT_TRUE(cm.ok()) << cm.status().message();
-    EXPECT_EQ(cm.value(), rm) << "d " << s.d;
-    EXPECT_GT(rm, 0) << "the case moves texels";
-    int differ = 0;
-    double worst = 0;
-    for (int t = 0; t < s.N; ++t) {
-      differ += ra[size_t(t)] != ca[size_t(t)];
-      EXPECT_NE(ca[size_t(t)], 1u) << "cluster without a basis is never chosen";
-      worst = std::max(worst, std::fabs(re[size_t(t)] - ce[size_t(t)]) / (a.x2[size_t(t)] + 1.0));
-    }
-    EXPECT_EQ(differ, 0) << "d " << s.d;
-    EXPECT_LE(worst, 1e-5) << "d " << s.d;
+  for (S s : {S{37, 100, 5, 3, 13}, S{2500, 60, 7, 2, 9}, S{1030, 40, 3, 15, 5}, S{19, 9, 4, 20, 7}, S{1, 3, 2, 1, 1}}) {
+    ProjectCase pc = make_project_case(s.d, s.nt, s.K, s.c, s.groups, unsigned(s.d + s.nt));
+    const size_t stride = size_t(pc.table.V), n = pc.batch.cand.size() * 8 * stride;
+    std::vector<float> ref(n, -1.f), got(n, -2.f);
+    lpca_cl::project_reference(pc.table, pc.batch, ref.data());
+    ASSERT_TRUE(lpca_cl::project_cl(pc.table, pc.batch, got.data()).ok()) << "d " << s.d;
+    // The reference against plain dot products in double, relative to ||x|| ||w||; the kernel
+    // against the reference on every used entry (padding lanes are zero in both).
+    double worst_ref = 0, worst_cl = 0;
+    for (size_t g = 0; g < pc.batch.groups(); ++g)
+      for (uint32_t p = pc.batch.cand_off[g]; p < pc.batch.cand_off[g + 1]; ++p)
+        for (int i = 0; i < 8; ++i)
+          for (int j = 0; j <= s.c; ++j) {
+            const float* x = pc.X.data() + size_t(pc.batch.texels[g * 8 + size_t(i)]) * s.d;
+            const float* w = pc.W.data() + (size_t(pc.batch.cand[p]) * (s.c + 1) + j) * s.d;
+            double dot = 0, xx = 0, ww = 0;
+            for (int r = 0; r < s.d; ++r) dot += double(x[r]) * w[r], xx += double(x[r]) * x[r], ww += double(w[r]) * w[r];
+            const size_t at = (size_t(p) * 8 + size_t(i)) * stride + size_t(j);
+            const double scale = std::sqrt(xx * ww) + 1e-30;
+            worst_ref = std::max(worst_ref, std::fabs(ref[at] - dot) / scale);
+            worst_cl = std::max(worst_cl, std::fabs(double(got[at]) - ref[at]) / scale);
+          }
+    EXPECT_LE(worst_ref, 1e-5) << "d " << s.d << " c " << s.c;
+    EXPECT_LE(worst_cl, 1e-5) << "d " << s.d << " c " << s.c;
   }
 }
 
@@ -367,28 +365,26 @@ TEST(OpenCLKernels, BrokenLpcaAndLpyrKernelsFallBack) {
   std::ofstream(dir + "/lpca.cl") << "__kernel void lpca_project(__global float* x) { not C either }\n";
   std::ofstream(dir + "/lpyr.cl") << "__kernel void lpyr_reduce(__global float* x) { still not C }\n";
   setenv("BTFC_KERNEL_DIR", dir.c_str(), 1);
-  AssignCase a = make_assign_case(19, 40, 3, 2, 1);
-  std::vector<uint32_t> as(40, 0), ar(40, 0);
-  std::vector<double> es(40), er(40);
-  auto bad = lpca_cl::assign_cl(a.p, as.data(), es.data());
+  ProjectCase pc = make_project_case(19, 40, 3, 2, 5, 1);
+  const size_t n = pc.batch.cand.size() * 8 * size_t(pc.table.V);
+  std::vector<float> ps(n), pr(n);
+  Status bad = lpca_cl::project_cl(pc.table, pc.batch, ps.data());
   ASSERT_FALSE(bad.ok());
-  EXPECT_EQ(bad.status().code(), StatusCode::device_error);
-  EXPECT_NE(bad.status().message().find("building OpenCL program lpca.cl failed"), std::string::npos) << bad.status().message();
-  EXPECT_NE(bad.status().message().find("compiler log"), std::string::npos);
+  EXPECT_EQ(bad.code(), StatusCode::device_error);
+  EXPECT_NE(bad.message().find("building OpenCL program lpca.cl failed"), std::string::npos) << bad.message();
+  EXPECT_NE(bad.message().find("compiler log"), std::string::npos);
   std::vector<float> src(5 * 3 * 4, 1.f), dst(3 * 2 * 4);
   Status ls = lpyr::reduce_cl(src.data(), 5, 3, 4, dst.data());
   EXPECT_EQ(ls.code(), StatusCode::device_error);
   EXPECT_NE(ls.message().find("lpyr.cl"), std::string::npos) << ls.message();
   // --device cl: the dispatchers report the error; auto: they warn once and run the reference.
   ocl::set_device_choice(ocl::DeviceChoice::cl);
-  EXPECT_FALSE(lpca_cl::assign(a.p, as.data(), es.data()).ok());
+  EXPECT_FALSE(lpca_cl::project(pc.table, pc.batch, ps.data()).ok());
   EXPECT_FALSE(lpyr::reduce_any(src.data(), 5, 3, 4, dst.data()).ok());
   ocl::set_device_choice(ocl::DeviceChoice::automatic);
-  std::fill(as.begin(), as.end(), 0u);
-  auto got = lpca_cl::assign(a.p, as.data(), es.data());
-  ASSERT_TRUE(got.ok());
-  EXPECT_EQ(got.value(), lpca_cl::assign_reference(a.p, ar.data(), er.data()));
-  EXPECT_EQ(as, ar);
+  ASSERT_TRUE(lpca_cl::project(pc.table, pc.batch, ps.data()).ok());
+  lpca_cl::project_reference(pc.table, pc.batch, pr.data());
+  EXPECT_EQ(ps, pr);
   std::fill(dst.begin(), dst.end(), 0.f);
   ASSERT_TRUE(lpyr::reduce_any(src.data(), 5, 3, 4, dst.data()).ok());
   for (float v : dst) EXPECT_FLOAT_EQ(v, 1.f);  // box mean of a constant

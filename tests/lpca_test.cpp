@@ -9,6 +9,7 @@
 #include <cstring>
 #include <random>
 
+#include "codecs/lpca/clustering.h"
 #include "codecs/lpca/lpca.h"
 #include "codecs/lpca/sh.h"
 #include "core/synth.h"
@@ -150,6 +151,29 @@ TEST(Lpca, ErrorNeverIncreasesAcrossIterations) {
     }
     EXPECT_LT(prev, first) << "reassignment should improve on the k-means++ start: " << cs.spec;
     EXPECT_NEAR(rel_error(b, decode(*m)), prev, 0.02 * prev + 1e-6) << cs.spec;
+  }
+}
+
+TEST(Lpca, PrunedAssignmentMovesLikeTheExhaustiveOne) {
+  // assign.h skips only clusters that cannot beat the texel's own, so the fit must equal the one
+  // that scores every cluster, while scoring fewer (texel, cluster) pairs.
+  Btf b = synth(32, 32, some_views({0, 7, 30}));
+  for (int clusters : {12, 3}) {  // Gram-path clusters (~85 texels) and subspace-iteration ones (~340+)
+    lpca::FitOptions o;
+    o.clusters = clusters, o.components = 3, o.iters = 6, o.seed = 3;
+    auto pruned = lpca::fit_local_pca(b, o);
+    o.prune = false;
+    auto full = lpca::fit_local_pca(b, o);
+    ASSERT_TRUE(pruned.ok() && full.ok());
+    EXPECT_EQ(pruned->cluster_of, full->cluster_of) << clusters;
+    EXPECT_EQ(pruned->sq_error, full->sq_error) << clusters;
+    EXPECT_EQ(pruned->changes, full->changes) << clusters;
+    ASSERT_FALSE(pruned->changes.empty());
+    EXPECT_GT(pruned->changes[0], 0) << "texels should move: " << clusters;
+    EXPECT_EQ(full->assign_scored, full->assign_exhaustive) << clusters;
+    EXPECT_LT(pruned->assign_scored, full->assign_scored) << clusters;
+    std::printf("clusters %d: pruned assignment scored %.3f of the pairs\n", clusters,
+                double(pruned->assign_scored) / double(full->assign_scored));
   }
 }
 

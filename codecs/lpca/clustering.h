@@ -6,20 +6,23 @@
 //     ABRDFs (Johnson-Lindenstrauss: distances are preserved to ~25 %, enough for seeding; exact
 //     k-means++ would stream the whole BTF once per cluster). Every texel joins its nearest seed.
 //  2. Repeat up to `iters` times:
-//     a. PCA step, per cluster (clusters in parallel, largest first): mean + `components`
-//        eigen-BRDFs of the centered members. A subspace of width c + 8 comes from the float Gram
-//        matrix of the smaller side (eigen-decomposed in double) when that side is <= 384, else
-//        from one subspace iteration started from the previous basis (two from random vectors
-//        for a new cluster); Rayleigh-Ritz in double then gives the best rank-c basis in it.
-//        The previous basis, with the new mean, is scored in the same pass and kept when it
-//        reconstructs the members better, so this step never increases the error even though
-//        the subspace is approximate. The total squared error after this step is recorded.
+//     a. PCA step, per cluster (clusters in parallel, largest first; cluster_pca.h): mean +
+//        `components` eigen-BRDFs of the centered members. A subspace of width c + 8 comes from
+//        the float Gram matrix of the smaller side (eigen-decomposed in double) when that side
+//        is <= 384, else from one subspace iteration started from the previous step's Ritz
+//        vectors (two from random vectors for a new cluster), streamed over the members in
+//        blocks; Rayleigh-Ritz in double then gives the best rank-c basis in it. The previous basis, with the new
+//        mean, is scored in the same pass and kept when it reconstructs the members better, so
+//        this step never increases the error even though the subspace is approximate. The total
+//        squared error after this step is recorded.
 //     b. Stop if this was the last iteration or the previous assignment step changed nothing.
-//     c. Assignment step: the error of texel x in cluster k is ||x - mu_k||^2 - ||E_k^T (x - mu_k)||^2
-//        (orthonormal E_k), computed for all k at once by one float GEMM per block of texels
-//        against the stacked [mu_k E_k] of all clusters. A texel moves only when another cluster
-//        is better by more than the GEMM's rounding margin (1e-5 of ||x||^2 + ||mu||^2), so
-//        float noise cannot make the error grow or the assignment oscillate.
+//     c. Assignment step (assign.h): the error of texel x in cluster k is
+//        ||x - mu_k||^2 - ||E_k^T (x - mu_k)||^2 (orthonormal E_k). Clusters that provably
+//        cannot beat the texel's own (a triangle-inequality bound from its reconstruction and
+//        residual) are skipped; the others are scored from float projections onto [mu_k E_k]
+//        (OpenCL kernel or C++ reference). A texel moves to the best one only when it is better
+//        by more than the projections' rounding margin (1e-5 of ||x||^2 + ||mu||^2), so float
+//        noise cannot make the error grow or the assignment oscillate.
 //     d. Empty clusters are re-seeded with the worst-reconstructed texels taken from clusters
 //        that keep at least one member; with fewer texels than clusters some stay empty.
 //  Per-iteration error is therefore non-increasing (up to float rounding of the sums).
@@ -44,6 +47,7 @@ struct FitOptions {
   int components = 8;
   int iters = 10;
   uint64_t seed = 1;
+  bool prune = true;  // skip clusters that cannot win in the assignment step (assign.h); false for tests
   Progress* progress = nullptr;
 };
 
@@ -59,6 +63,8 @@ struct FitResult {
   double total_energy = 0;            // ||B||_F^2
   bool converged = false;             // an assignment step changed nothing
   double assign_seconds = 0;          // wall time in assignment steps (kernel or C++ reference)
+  int64_t assign_scored = 0;          // (texel, cluster) pairs scored in all assignment steps
+  int64_t assign_exhaustive = 0;      // ... and how many an exhaustive step would have scored
 };
 
 Result<FitResult> fit_local_pca(const Btf& btf, const FitOptions& opt);

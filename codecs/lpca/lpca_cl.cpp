@@ -12,36 +12,6 @@
 namespace btfc::lpca_cl {
 namespace {
 
-using MatrixXfR = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-
-// The selection of one texel from its projections p (K groups of c + 1); the kernel lpca_select
-// does the same arithmetic.
-int select(const AssignProblem& pr, const float* p, size_t t, uint32_t* assign, double* err) {
-  const int K = pr.K, c = pr.c;
-  const uint32_t cur = assign[t];
-  double best = std::numeric_limits<double>::infinity(), cur_e = best;
-  uint32_t best_k = cur;
-  for (int k = 0; k < K; ++k) {
-    const double m2 = pr.mu2[size_t(k)];
-    if (m2 < 0) continue;
-    double e = pr.x2[t] - 2.0 * double(p[k * (c + 1)]) + m2;
-    for (int j = 0; j < c; ++j) {
-      const double q = double(p[k * (c + 1) + 1 + j]) - pr.muE[size_t(k) * size_t(c) + size_t(j)];
-      e -= q * q;
-    }
-    e = std::max(0.0, e);
-    if (uint32_t(k) == cur) cur_e = e;
-    if (e < best) best = e, best_k = uint32_t(k);
-  }
-  if (best_k != cur && best < cur_e - pr.margin * (pr.x2[t] + pr.mu2[best_k])) {
-    assign[t] = best_k;
-    err[t] = best;
-    return 1;
-  }
-  err[t] = std::isfinite(cur_e) ? cur_e : best;
-  return 0;
-}
-
 #define BTFC_CL_CHECK(call, what)                                                                                      \
   do {                                                                                                                 \
     cl_int e_ = (call);                                                                                                \
@@ -54,118 +24,108 @@ Status set_arg(cl_kernel k, int i, const T& v, const char* name) {
   return {};
 }
 
-// Directions per lpca_project launch: the chunk of W (k_chunk x Mp floats, 0.3-1.2 MB for
-// 72-288 projections) stays in the core's cache while all texel groups pass over it.
-constexpr int k_chunk = 1024;
+// Directions per lpca_project launch: a group's 8 texel chunks (32 KB) stay in L1 while it
+// runs through its candidates, each cluster's chunk (36 KB at 8 components) in L2.
+constexpr int64_t k_chunk = 1024;
+constexpr int k_vblock = 3;  // vectors per register block (8 texels x 3 vectors x float16)
+using Lanes = Eigen::Array<float, 16, 1>;
 
 }  // namespace
 
-int assign_reference(const AssignProblem& pr, uint32_t* assign, double* err) {
-  const Eigen::Index d = pr.d, N = pr.N, M = Eigen::Index(pr.K) * (pr.c + 1);
-  const Eigen::Map<const Eigen::MatrixXf> X(pr.X, d, N), W(pr.W, d, M);
-  // Texel blocks in parallel, each block's GEMM single-threaded (Eigen does not nest inside an
-  // OpenMP region): one fork/join per step instead of Eigen's fine-grained GEMM synchronisation,
-  // which ran 3-15x slower than one thread when the 2-core machine was shared.
-  int moved = 0;
-  const Eigen::Index tb = 512;
-#pragma omp parallel reduction(+ : moved)
-  {
-    MatrixXfR P(tb, M);
-#pragma omp for schedule(dynamic, 1)
-    for (Eigen::Index t0 = 0; t0 < N; t0 += tb) {
-      const Eigen::Index nb = std::min(tb, N - t0);
-      P.topRows(nb).noalias() = X.middleCols(t0, nb).transpose() * W;  // nb x K(c+1)
-      for (Eigen::Index i = 0; i < nb; ++i) moved += select(pr, P.data() + i * M, size_t(t0 + i), assign, err);
-    }
-  }
-  return moved;
+void fill_projection_table(const float* W, int64_t d, int K, int c, ProjectionTable& t) {
+  const int V = (c + 1 + k_vblock - 1) / k_vblock * k_vblock;
+  const size_t size = size_t(K) * size_t(V) * size_t(d);
+  if (t.vectors.size() != size || t.V != V) t.vectors.assign(size, 0.0f);  // else the padding is still zero
+  t.d = d, t.K = K, t.c = c, t.V = V;
+#pragma omp parallel for schedule(static)
+  for (int k = 0; k < K; ++k)
+    std::copy_n(W + size_t(k) * size_t(c + 1) * size_t(d), size_t(c + 1) * size_t(d), t.vectors.data() + size_t(k) * size_t(V) * size_t(d));
 }
 
-Result<int> assign_cl(const AssignProblem& pr, uint32_t* assign, double* err) {
+void project_reference(const ProjectionTable& tb, const GroupBatch& b, float* P) {
+  const int64_t d = tb.d, groups = int64_t(b.groups());
+  const int V = tb.V;
+#pragma omp parallel for schedule(dynamic, 4)
+  for (int64_t g = 0; g < groups; ++g) {
+    const float* x[8];
+    for (int i = 0; i < 8; ++i) x[i] = b.X + size_t(b.texels[size_t(g) * 8 + size_t(i)]) * size_t(d);
+    for (int64_t r0 = 0; r0 < d; r0 += k_chunk) {
+      const int64_t rc = std::min(k_chunk, d - r0), r16 = rc / 16 * 16;
+      for (uint32_t p = b.cand_off[size_t(g)]; p < b.cand_off[size_t(g) + 1]; ++p)
+        for (int j = 0; j < V; j += k_vblock) {
+          const float* w[k_vblock];
+          for (int v = 0; v < k_vblock; ++v) w[v] = tb.vectors.data() + (size_t(b.cand[p]) * size_t(V) + size_t(j + v)) * size_t(d) + size_t(r0);
+          // Eigen's fixed-size 16-float arrays stay in vector registers (plain float arrays with
+          // omp simd ran 5x slower here).
+          Lanes acc[8][k_vblock];
+          for (auto& a : acc)
+            for (Lanes& l : a) l.setZero();
+          for (int64_t r = 0; r < r16; r += 16) {
+            const Lanes w0 = Eigen::Map<const Lanes>(w[0] + r), w1 = Eigen::Map<const Lanes>(w[1] + r), w2 = Eigen::Map<const Lanes>(w[2] + r);
+            for (int i = 0; i < 8; ++i) {
+              const Lanes xv = Eigen::Map<const Lanes>(x[i] + r0 + r);
+              acc[i][0] += xv * w0, acc[i][1] += xv * w1, acc[i][2] += xv * w2;
+            }
+          }
+          for (int i = 0; i < 8; ++i)
+            for (int v = 0; v < k_vblock; ++v) {
+              float s = acc[i][v].sum();
+              for (int64_t r = r16; r < rc; ++r) s = std::fma(x[i][r0 + r], w[v][r], s);
+              float& q = P[(size_t(p) * 8 + size_t(i)) * size_t(V) + size_t(j + v)];
+              q = r0 == 0 ? s : q + s;
+            }
+        }
+    }
+  }
+}
+
+Status project_cl(const ProjectionTable& tb, const GroupBatch& b, float* P) {
+  const size_t groups = b.groups(), pairs = b.cand.size();
+  if (groups == 0 || pairs == 0) return {};
   BTFC_ASSIGN_OR_RETURN(ocl::Runtime * rt, ocl::Runtime::get());
   BTFC_ASSIGN_OR_RETURN(cl_command_queue queue, rt->queue());
   BTFC_ASSIGN_OR_RETURN(cl_kernel kp, rt->kernel("lpca", "lpca_project"));
-  BTFC_ASSIGN_OR_RETURN(cl_kernel ks, rt->kernel("lpca", "lpca_select"));
-  const size_t d = size_t(pr.d), N = size_t(pr.N), M = size_t(pr.K) * size_t(pr.c + 1);
-  const int strips = int((M + 15) / 16);
-  const size_t Mp = size_t(strips) * 16;
-  // W in strips of 16 projection vectors, [strip][r][16], zero-padded to Mp.
-  std::vector<float> Ws(size_t(strips) * d * 16, 0.0f);
-#pragma omp parallel for schedule(static)
-  for (int s = 0; s < strips; ++s)
-    for (size_t j = 0; j < 16 && size_t(s) * 16 + j < M; ++j) {
-      const float* col = pr.W + (size_t(s) * 16 + j) * d;
-      for (size_t r = 0; r < d; ++r) Ws[(size_t(s) * d + r) * 16 + j] = col[r];
-    }
-  // Texel blocks of <= 256 MiB of ABRDFs (the device's allocation limit is 1-2 GiB, toolchain.md 3).
-  const size_t nb_max = std::clamp<size_t>((size_t(256) << 20) / (d * 4), 8, N);
-  BTFC_ASSIGN_OR_RETURN(ocl::Buffer ws, ocl::Buffer::create(*rt, Ws.size() * 4, Ws.data(), CL_MEM_READ_ONLY));
-  BTFC_ASSIGN_OR_RETURN(ocl::Buffer pb, ocl::Buffer::create(*rt, nb_max * Mp * 4, nullptr, CL_MEM_READ_WRITE));
-  BTFC_ASSIGN_OR_RETURN(ocl::Buffer mu2, ocl::Buffer::create(*rt, pr.mu2.size() * 8, pr.mu2.data(), CL_MEM_READ_ONLY));
-  std::vector<double> muE_pad(pr.muE);
-  if (muE_pad.empty()) muE_pad.push_back(0);
-  BTFC_ASSIGN_OR_RETURN(ocl::Buffer mue, ocl::Buffer::create(*rt, muE_pad.size() * 8, muE_pad.data(), CL_MEM_READ_ONLY));
-  std::vector<int> moved_flags(nb_max);
-  int moved = 0;
-  for (size_t t0 = 0; t0 < N; t0 += nb_max) {
-    const size_t nb = std::min(nb_max, N - t0);
-    BTFC_ASSIGN_OR_RETURN(ocl::Buffer xb, ocl::Buffer::wrap(*rt, nb * d * 4, const_cast<float*>(pr.X + t0 * d), CL_MEM_READ_ONLY));
-    const cl_mem xm = xb.get(), wm = ws.get(), pm = pb.get();
-    const cl_int di = cl_int(d), si = strips, ni = cl_int(nb);
-    for (size_t r0 = 0; r0 < d; r0 += k_chunk) {
-      const cl_int r0i = cl_int(r0), rci = cl_int(std::min<size_t>(k_chunk, d - r0)), first = r0 == 0;
-      BTFC_RETURN_IF_ERROR(set_arg(kp, 0, xm, "lpca_project"));
-      BTFC_RETURN_IF_ERROR(set_arg(kp, 1, di, "lpca_project"));
-      BTFC_RETURN_IF_ERROR(set_arg(kp, 2, wm, "lpca_project"));
-      BTFC_RETURN_IF_ERROR(set_arg(kp, 3, si, "lpca_project"));
-      BTFC_RETURN_IF_ERROR(set_arg(kp, 4, r0i, "lpca_project"));
-      BTFC_RETURN_IF_ERROR(set_arg(kp, 5, rci, "lpca_project"));
-      BTFC_RETURN_IF_ERROR(set_arg(kp, 6, ni, "lpca_project"));
-      BTFC_RETURN_IF_ERROR(set_arg(kp, 7, first, "lpca_project"));
-      BTFC_RETURN_IF_ERROR(set_arg(kp, 8, pm, "lpca_project"));
-      const size_t global = (nb + 7) / 8;
-      BTFC_CL_CHECK(clEnqueueNDRangeKernel(queue, kp, 1, nullptr, &global, nullptr, 0, nullptr, nullptr), "lpca_project");
-    }
-    BTFC_ASSIGN_OR_RETURN(ocl::Buffer x2b, ocl::Buffer::wrap(*rt, nb * 8, const_cast<double*>(pr.x2 + t0), CL_MEM_READ_ONLY));
-    BTFC_ASSIGN_OR_RETURN(ocl::Buffer ab, ocl::Buffer::wrap(*rt, nb * 4, assign + t0, CL_MEM_READ_WRITE));
-    BTFC_ASSIGN_OR_RETURN(ocl::Buffer eb, ocl::Buffer::wrap(*rt, nb * 8, err + t0, CL_MEM_WRITE_ONLY));
-    BTFC_ASSIGN_OR_RETURN(ocl::Buffer mb, ocl::Buffer::wrap(*rt, nb * 4, moved_flags.data(), CL_MEM_WRITE_ONLY));
-    const cl_mem m2m = mu2.get(), mem = mue.get(), x2m = x2b.get(), am = ab.get(), em = eb.get(), mm = mb.get();
-    const cl_int Mpi = cl_int(Mp), Ki = pr.K, ci = pr.c;
-    const cl_double margin = pr.margin;
+  const size_t d = size_t(tb.d), stride = size_t(tb.V);
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer xb, ocl::Buffer::wrap(*rt, size_t(b.nt) * d * 4, const_cast<float*>(b.X), CL_MEM_READ_ONLY));
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer wb, ocl::Buffer::wrap(*rt, tb.vectors.size() * 4, const_cast<float*>(tb.vectors.data()), CL_MEM_READ_ONLY));
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer tx, ocl::Buffer::create(*rt, b.texels.size() * 4, b.texels.data(), CL_MEM_READ_ONLY));
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer co, ocl::Buffer::create(*rt, b.cand_off.size() * 4, b.cand_off.data(), CL_MEM_READ_ONLY));
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer ca, ocl::Buffer::create(*rt, pairs * 4, b.cand.data(), CL_MEM_READ_ONLY));
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer pb, ocl::Buffer::wrap(*rt, pairs * 8 * stride * 4, P, CL_MEM_READ_WRITE));
+  const cl_mem xm = xb.get(), wm = wb.get(), tm = tx.get(), om = co.get(), cm = ca.get(), pm = pb.get();
+  const cl_int di = cl_int(d), Vi = tb.V, gi = cl_int(groups);
+  for (size_t r0 = 0; r0 < d; r0 += size_t(k_chunk)) {
+    const cl_int r0i = cl_int(r0), rci = cl_int(std::min<size_t>(size_t(k_chunk), d - r0)), first = r0 == 0;
     int a = 0;
-    BTFC_RETURN_IF_ERROR(set_arg(ks, a++, pm, "lpca_select"));
-    BTFC_RETURN_IF_ERROR(set_arg(ks, a++, Mpi, "lpca_select"));
-    BTFC_RETURN_IF_ERROR(set_arg(ks, a++, Ki, "lpca_select"));
-    BTFC_RETURN_IF_ERROR(set_arg(ks, a++, ci, "lpca_select"));
-    BTFC_RETURN_IF_ERROR(set_arg(ks, a++, m2m, "lpca_select"));
-    BTFC_RETURN_IF_ERROR(set_arg(ks, a++, mem, "lpca_select"));
-    BTFC_RETURN_IF_ERROR(set_arg(ks, a++, x2m, "lpca_select"));
-    BTFC_RETURN_IF_ERROR(set_arg(ks, a++, margin, "lpca_select"));
-    BTFC_RETURN_IF_ERROR(set_arg(ks, a++, ni, "lpca_select"));
-    BTFC_RETURN_IF_ERROR(set_arg(ks, a++, am, "lpca_select"));
-    BTFC_RETURN_IF_ERROR(set_arg(ks, a++, em, "lpca_select"));
-    BTFC_RETURN_IF_ERROR(set_arg(ks, a++, mm, "lpca_select"));
-    const size_t global = nb;
-    BTFC_CL_CHECK(clEnqueueNDRangeKernel(queue, ks, 1, nullptr, &global, nullptr, 0, nullptr, nullptr), "lpca_select");
-    BTFC_RETURN_IF_ERROR(ab.sync_to_host(queue, nb * 4));
-    BTFC_RETURN_IF_ERROR(eb.sync_to_host(queue, nb * 8));
-    BTFC_RETURN_IF_ERROR(mb.sync_to_host(queue, nb * 4));
-    for (size_t i = 0; i < nb; ++i) moved += moved_flags[i];
+    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, xm, "lpca_project"));
+    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, di, "lpca_project"));
+    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, tm, "lpca_project"));
+    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, om, "lpca_project"));
+    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, cm, "lpca_project"));
+    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, wm, "lpca_project"));
+    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, Vi, "lpca_project"));
+    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, r0i, "lpca_project"));
+    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, rci, "lpca_project"));
+    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, gi, "lpca_project"));
+    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, first, "lpca_project"));
+    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, pm, "lpca_project"));
+    // One work-item per work-group: groups differ in their candidate counts, and PoCL's own
+    // choice (a large divisor of the global size) left one of the 2 cores idle for much of a
+    // launch (assignment 1.3-1.6x slower at 128^2 texels).
+    const size_t global = groups, local = 1;
+    BTFC_CL_CHECK(clEnqueueNDRangeKernel(queue, kp, 1, nullptr, &global, &local, 0, nullptr, nullptr), "lpca_project");
   }
-  return moved;
+  return pb.sync_to_host(queue, pairs * 8 * stride * 4);
 }
 
-Result<int> assign(const AssignProblem& p, uint32_t* a, double* e) {
+Status project(const ProjectionTable& t, const GroupBatch& b, float* P) {
   if (ocl::use_opencl()) {
-    // The kernels write assign / err only for texels they finish; on a failure mid-way the
-    // reference redoes every texel from the same inputs, so the result is the same either way.
-    std::vector<uint32_t> saved(a, a + p.N);
-    Result<int> r = assign_cl(p, a, e);
-    if (r.ok() || !ocl::fall_back_after(r.status())) return r;
-    std::copy(saved.begin(), saved.end(), a);
+    // The kernel only writes P; on a failure the reference recomputes all of it.
+    Status s = project_cl(t, b, P);
+    if (s.ok() || !ocl::fall_back_after(s)) return s;
   }
-  return assign_reference(p, a, e);
+  project_reference(t, b, P);
+  return {};
 }
 
 void relight_reference(std::span<const uint32_t> cluster, const float* W, int c, const float* L, float* out) {

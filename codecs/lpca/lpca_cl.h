@@ -1,14 +1,14 @@
 // lpca on OpenCL: the clustering's assignment step and the relighting (kernels/lpca.cl), each
 // with the plain C++ reference it is tested against and that runs on the CPU path.
 //
-// Assignment (clustering.h step c): for every texel x and cluster k, the reconstruction error
-//   e_k = ||x||^2 - 2 <x, mu_k> + ||mu_k||^2 - sum_j (<x, E_kj> - <mu_k, E_kj>)^2
-// from the projections P = X^T W (W = the stacked [mu_k E_k^T], d x K (c + 1)), then the best
-// cluster with a move margin. Reference: one float GEMM per texel block (Eigen, through
-// OpenBLAS) and the selection in double. Kernel: lpca_project (register-blocked projection,
-// direction chunks kept in cache) and lpca_select (the same selection in double; needs
-// cl_khr_fp64, which PoCL has). P differs from the GEMM's by float summation order only, so
-// assignments agree except where two clusters are within rounding of each other.
+// Assignment (clustering.h step c, assign.h): projections of texels onto candidate clusters
+// [mu_k E_k^T]. The texels come in groups of 8, each group with a list of candidate clusters;
+// for every (group, candidate k) pair p, texel i of the group and vector j < c + 1 of cluster k,
+//   P[(p * 8 + i) * V + j] = <x_i, W_kj>,   V = c + 1 rounded up to a multiple of 3.
+// Kernel lpca_project: lanes along the directions, a work-item keeps 8 texels x 3 vectors of
+// float16 partial sums in registers (11 loads per 24 FMAs, no padded lanes); one launch per
+// chunk of 1024 directions, so a group's texel chunks stay in L1 across its candidates.
+// Reference: the same loops in C++. Float sums in another order: the two agree to rounding.
 //
 // Relighting (seed 002 eq. 2-3): out[t] = L[r0] + sum_i w[t][i] L[r0 + 1 + i], r0 = cluster(t)
 // (c + 1), L = per table row, the view-blended dot products of its SH coefficients with the
@@ -22,23 +22,32 @@
 
 namespace btfc::lpca_cl {
 
-struct AssignProblem {
-  const float* X = nullptr;  // texel-major ABRDFs: texel t at X + t d
-  int64_t d = 0, N = 0;
-  int K = 0, c = 0;
-  const float* W = nullptr;           // d x K (c + 1), column-major: column k (c + 1) = mu_k, then E_k1..E_kc
-  std::vector<double> mu2;            // K: ||mu_k||^2, or -1 for a cluster without a basis (skipped)
-  std::vector<double> muE;            // K x c: <mu_k, E_kj>
-  const double* x2 = nullptr;         // N: ||x_t||^2
-  double margin = 1e-5;               // relative move margin
+// W = the stacked [mu_k E_k^T] in the kernel's layout: per cluster V vectors (zero vectors past
+// c + 1), each d contiguous values: [k][j][r]. Filled once per assignment step.
+struct ProjectionTable {
+  int64_t d = 0;
+  int K = 0, c = 0, V = 0;
+  std::vector<float> vectors;
+};
+// W: d x K (c + 1), column-major: column k (c + 1) = mu_k, then E_k1..E_kc. Reuses t's storage
+// when the shape is unchanged (fresh memory is slow to touch on the VMs btfc runs on).
+void fill_projection_table(const float* W, int64_t d, int K, int c, ProjectionTable& t);
+
+// One batch of groups over a range of texels (the device's allocation limit bounds a range).
+struct GroupBatch {
+  const float* X = nullptr;        // texels [0, nt) of the range, texel-major (texel t at X + t d)
+  int64_t nt = 0;
+  std::vector<uint32_t> texels;    // 8 per group, each < nt (a short group repeats a texel)
+  std::vector<uint32_t> cand_off;  // groups + 1 offsets into cand
+  std::vector<uint32_t> cand;      // the cluster of each (group, candidate) pair, < K
+  size_t groups() const { return cand_off.empty() ? 0 : cand_off.size() - 1; }
 };
 
-// Both update assign[t] (moves only) and err[t] (error in the texel's resulting cluster) and
-// return the number of texels moved.
-int assign_reference(const AssignProblem& p, uint32_t* assign, double* err);
-Result<int> assign_cl(const AssignProblem& p, uint32_t* assign, double* err);
-// assign_cl when OpenCL is in use (falling back under --device auto), else the reference.
-Result<int> assign(const AssignProblem& p, uint32_t* assign, double* err);
+// P: cand.size() x 8 x V floats.
+void project_reference(const ProjectionTable& t, const GroupBatch& b, float* P);
+Status project_cl(const ProjectionTable& t, const GroupBatch& b, float* P);
+// project_cl when OpenCL is in use (falling back under --device auto), else the reference.
+Status project(const ProjectionTable& t, const GroupBatch& b, float* P);
 
 // Relighting of every texel: cluster [n], weights [n x c] row-major, L [K (c + 1) x 3].
 void relight_reference(std::span<const uint32_t> cluster, const float* W, int c, const float* L, float* out_rgb);
