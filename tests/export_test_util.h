@@ -42,6 +42,30 @@ inline std::unique_ptr<Model> encode(const Codec& codec, const Btf& b, const std
   return m.ok() ? std::move(m).value() : nullptr;
 }
 
+// Encodes by spec string ("fmf:rank=8"), failing the test on an error.
+inline std::unique_ptr<Model> encode_spec(const Btf& b, const std::string& spec) {
+  auto r = resolve_spec(spec);
+  EXPECT_TRUE(r.ok()) << r.status().message();
+  if (!r.ok()) return nullptr;
+  Context ctx;
+  auto m = r->first->encode(b, r->second, ctx);
+  EXPECT_TRUE(m.ok()) << m.status().message();
+  return m.ok() ? std::move(m).value() : nullptr;
+}
+
+// A synthetic BTF on the full UBO2003 light and view sets, values scaled by `scale` (HDR tests).
+inline Btf synth_ubo(int w, int h, float scale = 1) {
+  SynthOptions o;
+  o.width = w, o.height = h, o.scale = scale;
+  return synthesize_btf(o).value();
+}
+
+inline double rms_of(const Btf& b) {
+  double s = 0;
+  for (size_t i = 0; i < b.size(); ++i) s += double(b.data()[i]) * b.data()[i];
+  return std::sqrt(s / double(b.size()));
+}
+
 inline ExportBundle bundle(const Model& m, bool half, int dir_n = 32) {
   ExportOptions o;
   o.half = half, o.direction_map = dir_n;
