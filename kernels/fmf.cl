@@ -19,6 +19,23 @@ inline float fmf_dot(__global const float* a, __global const float* b, int C) {
   return s;
 }
 
+/* The three colour rows u, u + C, u + 2C dotted with one texel row s: s is loaded once, three
+   independent 8-lane sums in fmf_dot's order (so results equal the references'). */
+inline float3 fmf_dot3(__global const float* u, __global const float* s, int C) {
+  float8 a0 = (float8)(0.0f), a1 = a0, a2 = a0;
+  int k = 0;
+  for (; k + 8 <= C; k += 8) {
+    float8 x = vload8(0, s + k);
+    a0 = mad(vload8(0, u + k), x, a0);
+    a1 = mad(vload8(0, u + C + k), x, a1);
+    a2 = mad(vload8(0, u + 2 * C + k), x, a2);
+  }
+  float4 h0 = a0.lo + a0.hi, h1 = a1.lo + a1.hi, h2 = a2.lo + a2.hi;
+  float3 r = (float3)((h0.x + h0.y) + (h0.z + h0.w), (h1.x + h1.y) + (h1.z + h1.w), (h2.x + h2.y) + (h2.z + h2.w));
+  for (; k < C; ++k) r = mad((float3)(u[k], u[C + k], u[2 * C + k]), (float3)(s[k]), r);
+  return r;
+}
+
 /* Bonn DFMF colour model 11 inverse: Y = exp(Y') - eps, U = U' (Y + eps), V = V' (Y + eps), then YUV -> RGB. */
 inline float3 fmf_undecorrelate(float ylog, float u, float v) {
   float y = exp(ylog) - BTFC_DRR_EPS;
@@ -31,22 +48,7 @@ inline float3 fmf_undecorrelate(float ylog, float u, float v) {
 inline float3 fmf_value(__global const float* U, __global const float* SxV, int C, int nL, int rows_per_block,
                         int texels, int mode, int texel, int l, int v) {
   if (mode == BTFC_FMF_RGB) {
-    /* The texel's row is loaded once for the three colour rows (three independent 8-lane sums,
-       same order as fmf_dot, so results equal the reference's). */
-    __global const float* sx = SxV + (size_t)texel * C;
-    __global const float* u = U + (size_t)(3 * (l + nL * v)) * C;
-    float8 a0 = (float8)(0.0f), a1 = a0, a2 = a0;
-    int k = 0;
-    for (; k + 8 <= C; k += 8) {
-      float8 s8 = vload8(0, sx + k);
-      a0 = mad(vload8(0, u + k), s8, a0);
-      a1 = mad(vload8(0, u + C + k), s8, a1);
-      a2 = mad(vload8(0, u + 2 * C + k), s8, a2);
-    }
-    float4 h0 = a0.lo + a0.hi, h1 = a1.lo + a1.hi, h2 = a2.lo + a2.hi;
-    float3 r = (float3)((h0.x + h0.y) + (h0.z + h0.w), (h1.x + h1.y) + (h1.z + h1.w), (h2.x + h2.y) + (h2.z + h2.w));
-    for (; k < C; ++k) r = mad((float3)(u[k], u[C + k], u[2 * C + k]), (float3)(sx[k]), r);
-    return r;
+    return fmf_dot3(U + (size_t)(3 * (l + nL * v)) * C, SxV + (size_t)texel * C, C);
   }
   size_t r = (size_t)(l + nL * v) * C, t = (size_t)texel * C;
   size_t ub = (size_t)rows_per_block * C, sb = (size_t)texels * C;
@@ -200,17 +202,5 @@ __kernel void fmf_eval_pair_rgb(__global const float* Ub, __global const float* 
                                 int n, __global float* out) {
   int i = get_global_id(0);
   if (i >= n) return;
-  __global const float* s = SxV + (size_t)texels[i] * C;
-  float8 a0 = (float8)(0.0f), a1 = a0, a2 = a0;
-  int k = 0;
-  for (; k + 8 <= C; k += 8) {
-    float8 x = vload8(0, s + k);
-    a0 = mad(vload8(0, Ub + k), x, a0);
-    a1 = mad(vload8(0, Ub + C + k), x, a1);
-    a2 = mad(vload8(0, Ub + 2 * C + k), x, a2);
-  }
-  float4 h0 = a0.lo + a0.hi, h1 = a1.lo + a1.hi, h2 = a2.lo + a2.hi;
-  float3 r = (float3)((h0.x + h0.y) + (h0.z + h0.w), (h1.x + h1.y) + (h1.z + h1.w), (h2.x + h2.y) + (h2.z + h2.w));
-  for (; k < C; ++k) r = mad((float3)(Ub[k], Ub[C + k], Ub[2 * C + k]), (float3)(s[k]), r);
-  vstore3(r, i, out);
+  vstore3(fmf_dot3(Ub, SxV + (size_t)texels[i] * C, C), i, out);
 }
