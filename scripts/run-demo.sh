@@ -16,6 +16,13 @@ specs=()
 for c in $("$BTFC" codecs --names); do specs+=(-c "$c"); done
 "$BTFC" bench "$WORK/demo.btfc" --label synthetic-64 "${specs[@]}"
 
+echo
+echo "== GPU export of every codec's model (KTX2 + manifest + GLSL; fmf also model.bsvtf)"
+for c in $("$BTFC" codecs --names); do
+  "$BTFC" -q compress "$WORK/demo.btfc" -c "$c" -o "$WORK/demo.$c.btfc"
+  "$BTFC" export "$WORK/demo.$c.btfc" --to "$WORK/export-$c" --no-previews | head -1
+done
+
 REAL=../shared/data/ubo2003_tv000_pv000_81lights
 if [ -d "$REAL" ]; then
   echo
