@@ -177,8 +177,12 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
   const BtfDesc& d = m->desc();
   if (d.channels > 3) return unsupported("export: lpca with " + std::to_string(d.channels) + " channels (the shader returns RGB: at most 3)");
   if (d.num_lights() > 65535 || d.num_views() > 65535) return unsupported("export: more than 65535 directions");
+  // A scene keeps only the measured directions inside its cones (formats/gpu/scene.h); the
+  // textures then index the kept directions, "light_indices" / "view_indices" map them back.
+  const std::vector<int> ls = directions_in_cone(d.lights, opt.scene ? opt.scene->light_cone : std::nullopt);
+  const std::vector<int> vs = directions_in_cone(d.views, opt.scene ? opt.scene->view_cone : std::nullopt);
   Layout L;
-  L.C = m->components(), L.P = (L.C + 3) / 4, L.nl = int(d.num_lights()), L.nv = int(d.num_views()), L.nc = d.channels;
+  L.C = m->components(), L.P = (L.C + 3) / 4, L.nl = int(ls.size()), L.nv = int(vs.size()), L.nc = d.channels;
   L.dir_n = opt.direction_map;
   const int K = m->clusters(), C = L.C, nc = L.nc;
   const size_t W = size_t(d.width), H = size_t(d.height), N = W * H, nl = size_t(L.nl), nv = size_t(L.nv);
@@ -212,7 +216,8 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
       for (size_t v = 0; v < nv; ++v)
         for (size_t l = 0; l < nl; ++l)
           for (int c = 0; c < nc; ++c)
-            eb[((size_t(k) * nv + v) * ew + size_t(mm) * nl + l) * 4 + size_t(c)] = row(Eigen::Index(d.row(l, v, size_t(c)))) / div;
+            eb[((size_t(k) * nv + v) * ew + size_t(mm) * nl + l) * 4 + size_t(c)] =
+                row(Eigen::Index(d.row(size_t(ls[l]), size_t(vs[v]), size_t(c)))) / div;
     }
   // SH coefficients: (m S + s, v ch + c, k) -> 4 coefficients.
   const int n2 = sh::num_coeffs(m->config().sh_order), S = (n2 + 3) / 4;
@@ -227,7 +232,7 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
         for (int c = 0; c < nc; ++c)
           for (int j = 0; j < n2; ++j)
             esh[((size_t(k) * shh + v * size_t(nc) + size_t(c)) * shw + size_t(mm) * size_t(S) + size_t(j / 4)) * 4 + size_t(j % 4)] =
-                src[((r * nv + v) * size_t(nc) + size_t(c)) * size_t(n2) + size_t(j)] / div;
+                src[((r * d.num_views() + size_t(vs[v])) * size_t(nc) + size_t(c)) * size_t(n2) + size_t(j)] / div;
     }
   const double sh_scale = opt.half && !opt.clamp_half ? half_safe_scale(esh) : 1.0;
   for (float& x : esh) x = float(x / sh_scale);
@@ -283,7 +288,11 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
     TP.channel_meaning = {"R", "G", "B", "unused"};
     b.textures.push_back(std::move(TP));
   }
-  BTFC_ASSIGN_OR_RETURN(auto dm, direction_maps(d, opt.direction_map));
+  BtfDesc dsub = d;  // the kept directions, for the Delaunay maps
+  dsub.lights.dirs.clear(), dsub.views.dirs.clear();
+  for (int l : ls) dsub.lights.dirs.push_back(d.lights.dirs[size_t(l)]);
+  for (int v : vs) dsub.views.dirs.push_back(d.views.dirs[size_t(v)]);
+  BTFC_ASSIGN_OR_RETURN(auto dm, direction_maps(dsub, opt.direction_map));
   b.textures.push_back(std::move(dm.first));
   b.textures.push_back(std::move(dm.second));
 
@@ -299,7 +308,15 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
       {"storage", "means and weights divided by cluster_scale, eigen-BRDFs orthonormal: every stored value is within [-1, 1] (no half "
                   "overflow); rgba16f is exact for a half-precision model (cluster_scale = its storage scales), else rounded (relative "
                   "2^-11); eigen_sh is rounded; rgba32f: exact to float rounding; prt: 8 bits as the model quantizes it"},
-      {"direction_map_size", opt.direction_map}};
+      {"direction_map_size", opt.direction_map},
+      {"light_indices", ls},
+      {"view_indices", vs}};
+  if (opt.scene)
+    b.scene_report = {{"kept", "the measured directions inside the scene's cones (widened by the longest Delaunay edge); all "
+                               "clusters, components and texels (lpca has no mip levels)"},
+                      {"lights_kept", ls.size()},
+                      {"views_kept", vs.size()},
+                      {"predicted_added_rel_error", 0.0}};
   if (L.prt) {
     b.evaluation["prt_scale"] = {L.prt_scale[0], L.prt_scale[1]};
     b.evaluation["prt"] = "btf_relit(uv, wv) = lambda_0 + sum_i w_i lambda_{1+i} (seed 002 eq. 3, fixed lighting), lambda_m = (2 prt - 1) "
