@@ -2,7 +2,8 @@
 # Out-of-core and MPI benchmark of fmf (docs/scaling.md, docs/benchmarks.md):
 # a synthetic 256 x 256 texel, 81 x 81 direction RGB BTF (5.2 GB float32) compressed
 #   1. in core (btfc compress, enough --max-memory),
-#   2. out of core with --max-memory 1G (working file built from the raw .btfc, then reused),
+#   2. out of core with --max-memory 1G: the raw .btfc streamed in place (the default for raw
+#      inputs), then with a working file (--work-file: built, then reused),
 #   3. with btfc-mpi on 1 and 2 ranks (one thread per rank) from the working file.
 # Usage: bench/ooc_bench.sh [BUILD_DIR] [WORK_DIR]   (WORK_DIR needs ~8 GB; removed at the end)
 set -euo pipefail
@@ -15,6 +16,8 @@ T="/usr/bin/time -f %e_s_%M_KB"
 [ -f "$W/s256.btfc" ] || $T "$B/btfc" -q synth --width 256 --height 256 --seed 1 -o "$W/s256.btfc"
 echo "== in core"
 $T "$B/btfc" --json compress "$W/s256.btfc" -c $SPEC -o "$W/in.btfc" --max-memory 16G > "$W/in.json"
+echo "== out of core, --max-memory 1G, raw .btfc streamed in place (no working file)"
+$T "$B/btfc" --json compress "$W/s256.btfc" -c $SPEC -o "$W/raw.btfc" --max-memory 1G > "$W/raw.json"
 rm -f "$W/w.btf"
 echo "== out of core, --max-memory 1G (builds the working file)"
 $T "$B/btfc" --json compress "$W/s256.btfc" -c $SPEC -o "$W/ooc.btfc" --max-memory 1G --work-file "$W/w.btf" > "$W/ooc.json"
@@ -35,9 +38,9 @@ w = sys.argv[1]
 def load(n):
     try: return json.load(open(f"{w}/{n}.json"))
     except Exception: return None
-i, o, o2 = load("in"), load("ooc"), load("ooc2")
+i, o, o2, rw = load("in"), load("ooc"), load("ooc2"), load("raw")
 print("in core:      read %.1f s + encode %.1f s, rel error %.5f" % (i["read_seconds"], i["encode_seconds"], i["stats"]["rel_error.rgb"]))
-for name, r in (("ooc build", o), ("ooc reuse", o2)):
+for name, r in (("ooc in place", rw), ("ooc build", o), ("ooc reuse", o2)):
     x = r["out_of_core"]
     print("%-12s encode %.1f s (work file %.1f s, factorization %.1f s), %d passes %s s, %.2f GB read, peak RSS %.2f GB, rel error %.5f" % (
         name, r["encode_seconds"], x["work_file_seconds"], x["factorize_seconds"], x["passes"],

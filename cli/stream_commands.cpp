@@ -51,12 +51,43 @@ Result<std::unique_ptr<Model>> encode_streamed(const Global& g, const std::strin
     return invalid_argument("--max-memory " + format_bytes(limit) + " is too small for " + desc.summary() + ": streaming needs at least " +
                             format_bytes(streaming_fixed_bytes(desc.abrdf_size(), desc.num_texels(), uint64_t(l)) +
                                          k_stream_bytes_per_value * desc.abrdf_size() * uint64_t(desc.width)));
+  Progress progress(g.quiet || g.json);
+  Context ctx;
+  ctx.seed = seed;
+  ctx.progress = &progress;
+  ctx.max_bytes = limit;
+  fmf::Collective single;
+  if (work_file.empty() && is_raw_btfc_file(in)) {
+    // A raw .btfc is texel-major already: stream its data tensor in place, no working file.
+    // Its chunk buffers take 12 bytes per value (float) instead of the working file's 10.
+    const uint32_t raw_lines = stream_lines_per_chunk(desc, uint64_t(l), limit / 12 * 10);
+    if (raw_lines > 0) {
+      BTFC_ASSIGN_OR_RETURN(std::unique_ptr<fmf::ChunkSource> src, open_raw_chunks(in, raw_lines));
+      const auto t0 = Clock::now();
+      BTFC_ASSIGN_OR_RETURN(StreamedEncode enc, encode_fmf_streamed(*src, desc, params, ctx, single));
+      report = json{{"max_memory", limit},
+                    {"work_file", in},
+                    {"work_file_built", false},
+                    {"work_file_reused", false},
+                    {"work_file_seconds", 0.0},
+                    {"work_file_bytes", 0},
+                    {"work_file_scale", 1.0},
+                    {"work_file_note", "raw .btfc streamed in place (texel-major already): no working file"},
+                    {"chunks", src->num_chunks()},
+                    {"chunk_texels", src->chunk_count(0)},
+                    {"passes", enc.stats.passes},
+                    {"bytes_read", enc.stats.bytes_read},
+                    {"pass_seconds", enc.stats.pass_seconds},
+                    {"factorize_seconds", since(t0)},
+                    {"buffer_bytes", enc.stats.buffer_bytes}};
+      return std::move(enc.model);
+    }
+  }
   std::string work = work_file;
   if (work.empty()) {
     work = temp_dir + "/.btfc-work-" + std::to_string(::getpid()) + ".btf";
     temp.path = work;
   }
-  Progress progress(g.quiet || g.json);
   BTFC_ASSIGN_OR_RETURN(WorkFile wf, prepare_work_file(in, work, lines, limit, &progress));
   if (!wf.note.empty() && !g.quiet && !g.json) std::cerr << "note: " << wf.note << "\n";
   BTFC_ASSIGN_OR_RETURN(BdiChunks file, BdiChunks::open(wf.path));
@@ -64,11 +95,6 @@ Result<std::unique_ptr<Model>> encode_streamed(const Global& g, const std::strin
   if (chunk_buffers + streaming_fixed_bytes(desc.abrdf_size(), desc.num_texels(), uint64_t(l)) > limit)
     return invalid_argument(wf.path + ": its chunks of " + std::to_string(file.chunk_count(0)) + " texels need " + format_bytes(chunk_buffers) +
                             " of buffers, more than --max-memory " + format_bytes(limit));
-  Context ctx;
-  ctx.seed = seed;
-  ctx.progress = &progress;
-  ctx.max_bytes = limit;
-  fmf::Collective single;
   const auto t0 = Clock::now();
   BTFC_ASSIGN_OR_RETURN(StreamedEncode enc, encode_fmf_streamed(file, desc, params, ctx, single));
   report = json{{"max_memory", limit},

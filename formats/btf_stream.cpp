@@ -12,6 +12,7 @@
 #include <cstring>
 #include <filesystem>
 #include <future>
+#include <mutex>
 
 #include "core/container.h"
 #include "formats/bonn/bdi_work.h"
@@ -94,6 +95,13 @@ class RawBands {
     if (m_fd >= 0) ::close(m_fd);
   }
   const BtfDesc& desc() const { return m_desc; }
+  const std::string& path() const { return m_path; }
+  uint32_t crc_prefix() const { return m_crc; }  // CRC of the chunk head, before the data
+  uint32_t crc_want() const { return m_crc_want; }
+  // Texels [t0, t0 + n) at any position, no CRC (RawChunks keeps its own).
+  Status pread_texels(uint64_t t0, uint64_t n, float* dst) const {
+    return pread_all(dst, n * m_desc.abrdf_size() * 4, m_off + t0 * m_desc.abrdf_size() * 4);
+  }
   // Texels [t0, t0 + n), read strictly in order (the CRC is sequential).
   Status read(uint64_t t0, uint64_t n, float* dst) {
     if (t0 != m_next) return invalid_argument(m_path + ": raw bands must be read in order");
@@ -133,6 +141,56 @@ class RawBands {
   int m_fd = -1;
   uint64_t m_off = 0, m_next = 0;
   uint32_t m_crc = 0, m_crc_want = 0;
+};
+
+// A raw .btfc read in place as column chunks of B for the streamed SVD: its data tensor is
+// texel-major already (each texel's ABRDF contiguous), so no working file is needed. The tensor
+// CRC is accumulated over the first in-order sweep (pass 0 reads every chunk in order) and
+// checked when that sweep completes; decode() checks values are finite.
+class RawChunks final : public fmf::ChunkSource {
+ public:
+  RawChunks(RawBands b, uint64_t per_chunk) : m_b(std::move(b)), m_per(per_chunk), m_crc(m_b.crc_prefix()) {
+    const uint64_t n = m_b.desc().num_texels();
+    m_chunks = (n + m_per - 1) / m_per;
+  }
+  size_t rows() const override { return m_b.desc().abrdf_size(); }
+  size_t num_chunks() const override { return m_chunks; }
+  size_t chunk_first(size_t c) const override { return c * m_per; }
+  size_t chunk_count(size_t c) const override { return std::min<uint64_t>(m_per, m_b.desc().num_texels() - c * m_per); }
+  size_t raw_bytes(size_t c) const override { return chunk_count(c) * rows() * 4; }
+  Status read(size_t c, void* raw) const override {
+    BTFC_RETURN_IF_ERROR(m_b.pread_texels(chunk_first(c), chunk_count(c), static_cast<float*>(raw)));
+    std::lock_guard<std::mutex> lock(m_mutex);
+    if (c != m_next) return {};
+    const uint64_t bytes = raw_bytes(c);
+    for (uint64_t done = 0; done < bytes;) {
+      const uInt k = uInt(std::min<uint64_t>(bytes - done, uint64_t(1) << 30));
+      m_crc = uint32_t(crc32(m_crc, static_cast<const Bytef*>(raw) + done, k));
+      done += k;
+    }
+    if (++m_next == m_chunks && m_crc != m_b.crc_want())
+      return corrupt_data(m_b.path() + ": chunk TNSR 'data': CRC mismatch (the file is corrupt)");
+    return {};
+  }
+  Status decode(size_t c, const void* raw, float* dst) const override {
+    const size_t n = chunk_count(c) * rows();
+    const float* src = static_cast<const float*>(raw);
+    for (size_t i = 0; i < n; ++i)
+      if (!std::isfinite(src[i])) {
+        const uint64_t t = chunk_first(c) + i / rows();
+        return corrupt_data(m_b.path() + ": non-finite value at texel (" + std::to_string(t % uint64_t(m_b.desc().width)) + ", " +
+                            std::to_string(t / uint64_t(m_b.desc().width)) + ")");
+      }
+    std::memcpy(dst, src, n * sizeof(float));
+    return {};
+  }
+
+ private:
+  RawBands m_b;
+  uint64_t m_per = 1, m_chunks = 0;
+  mutable std::mutex m_mutex;
+  mutable uint64_t m_next = 0;
+  mutable uint32_t m_crc = 0;
 };
 
 // Rows of texels per band for `bytes_per_value` bytes of buffer per value within max_bytes.
@@ -205,6 +263,15 @@ Status fill(const std::string& input, BdiWriter& w, const BtfDesc& d, size_t max
 }
 
 }  // namespace
+
+Result<std::unique_ptr<fmf::ChunkSource>> open_raw_chunks(const std::string& path, uint32_t lines_per_chunk) {
+  if (!is_raw_btfc(path, nullptr)) return invalid_argument(path + ": not a raw (uncompressed) .btfc");
+  BTFC_ASSIGN_OR_RETURN(RawBands b, RawBands::open(path));
+  const uint64_t per = uint64_t(std::max<uint32_t>(lines_per_chunk, 1)) * uint64_t(b.desc().width);
+  return std::unique_ptr<fmf::ChunkSource>(std::make_unique<RawChunks>(std::move(b), per));
+}
+
+bool is_raw_btfc_file(const std::string& path) { return is_raw_btfc(path, nullptr); }
 
 Result<BtfDesc> probe_btf(const std::string& path) {
   std::error_code ec;

@@ -14,7 +14,10 @@
 #pragma once
 #include <string>
 
+#include <memory>
+
 #include "codecs/codec.h"
+#include "codecs/fmf/ooc_svd.h"
 #include "core/btf.h"
 #include "core/progress.h"
 
@@ -22,6 +25,13 @@ namespace btfc {
 
 // The shape of the BTF at `path` without reading its values (any input read_btf takes).
 Result<BtfDesc> probe_btf(const std::string& path);
+
+// A raw .btfc is texel-major already: the streamed SVD reads its data tensor in place, in
+// chunks of `lines_per_chunk` scan lines, with no working file (CRC checked over the first
+// in-order sweep, values checked finite). Chunk buffers: 12 bytes per value (one raw float
+// chunk + two float blocks), against 10 for a half working file.
+bool is_raw_btfc_file(const std::string& path);
+Result<std::unique_ptr<fmf::ChunkSource>> open_raw_chunks(const std::string& path, uint32_t lines_per_chunk);
 
 struct WorkFile {
   std::string path;        // the BDI file to read

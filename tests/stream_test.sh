@@ -51,6 +51,29 @@ assert abs(a - b) / a < 0.01, (a, b)
 print("ok   ooc-vs-in-core rel_l2 %.6f vs %.6f, peak RSS %.1f MiB (limit 40 MiB + 200 MiB overhead)" % (a, b, o["peak_rss_bytes"] / 2**20))
 PY
 
+# With room for float chunks (12 bytes per value) a raw .btfc is streamed in place: no working
+# file, the same factorization, and its CRC still checked (a flipped bit is an error, no output).
+check ooc-raw 0 "$BTFC" --json compress "$W/s.btfc" -c $SPEC -o "$W/ooc_raw.btfc" --max-memory 80M
+cp "$W/out.txt" "$W/ooc_raw.json"
+check cmp-ooc-raw 0 "$BTFC" --json compare --no-ssim "$W/s.btfc" "$W/ooc_raw.btfc"
+cp "$W/out.txt" "$W/cmp_ooc_raw.json"
+python3 - "$W" <<'PY' || fails=$((fails + 1))
+import json, sys
+w = sys.argv[1]
+o = json.load(open(w + "/ooc_raw.json"))["out_of_core"]
+assert not o["work_file_built"] and "in place" in o["work_file_note"] and o["chunks"] >= 2, o
+assert o["bytes_read"] == 4 * 56 * 56 * 19683 * 4, o   # 4 passes over the float tensor
+assert o["peak_rss_bytes"] <= (80 << 20) + (200 << 20), o["peak_rss_bytes"]
+a = json.load(open(w + "/cmp_in.json"))["rel_l2"]; b = json.load(open(w + "/cmp_ooc_raw.json"))["rel_l2"]
+assert abs(a - b) / a < 0.01, (a, b)
+print("ok   ooc-raw-in-place rel_l2 %.6f vs in core %.6f, peak RSS %.1f MiB" % (b, a, o["peak_rss_bytes"] / 2**20))
+PY
+cp "$W/s.btfc" "$W/flip.btfc"
+python3 -c "import os,sys; p=sys.argv[1]; n=os.path.getsize(p); f=open(p,'r+b'); f.seek(n//2); b=f.read(1); f.seek(n//2); f.write(bytes([b[0]^16]))" "$W/flip.btfc"
+check ooc-raw-crc 2 "$BTFC" compress "$W/flip.btfc" -c $SPEC -o "$W/flip.fmf.btfc" --max-memory 80M
+expect_grep ooc-raw-crc-msg "CRC mismatch" "$W/err.txt"
+[ ! -e "$W/flip.fmf.btfc" ] && echo "ok   ooc-raw-crc-no-output" || { echo "FAIL ooc-raw-crc-no-output"; fails=$((fails + 1)); }
+
 # A kept working file is a Bonn BDI btfc reads as a BTF; the second run reuses it.
 check keep 0 "$BTFC" --json compress "$W/s.btfc" -c $SPEC -o "$W/k.btfc" --work-file "$W/work.btf" --max-memory 40M
 check info-work 0 "$BTFC" info "$W/work.btf"

@@ -37,6 +37,14 @@ Result<StreamedEncode> encode_fmf_streamed(const BdiChunks& file, const BtfDesc&
   if (desc.abrdf_size() != file.desc().abrdf_size() || desc.num_texels() != file.desc().num_texels())
     return invalid_argument(file.path() + ": working file shape (" + file.desc().summary() + ") differs from the BTF's (" + desc.summary() + ")");
   BdiChunkSource src(file);
+  return encode_fmf_streamed(src, desc, p, ctx, coll);
+}
+
+Result<StreamedEncode> encode_fmf_streamed(const fmf::ChunkSource& src, const BtfDesc& desc, const Params& p, Context& ctx,
+                                           fmf::Collective& coll) {
+  BTFC_RETURN_IF_ERROR(streaming_sketch_width(p).status());
+  if (src.rows() != desc.abrdf_size() || src.texels() != desc.num_texels())
+    return invalid_argument("fmf out of core: the chunk source's shape differs from the BTF's (" + desc.summary() + ")");
   fmf::SvdOptions opt;
   opt.max_rank = int(p.get_int("rank"));
   opt.target_rel_error = p.get_real("target_error");

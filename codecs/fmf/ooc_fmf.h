@@ -60,5 +60,9 @@ struct StreamedEncode {
 // whose direction vectors are exact). `chunks` null = this process's share by coll.rank().
 Result<StreamedEncode> encode_fmf_streamed(const BdiChunks& file, const BtfDesc& desc, const Params& params, Context& ctx,
                                            fmf::Collective& coll);
+// The same from any chunk source of `desc`'s shape (e.g. a raw .btfc read in place,
+// formats/btf_stream.h).
+Result<StreamedEncode> encode_fmf_streamed(const fmf::ChunkSource& src, const BtfDesc& desc, const Params& params, Context& ctx,
+                                           fmf::Collective& coll);
 
 }  // namespace btfc
