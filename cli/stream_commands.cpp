@@ -57,30 +57,37 @@ Result<std::unique_ptr<Model>> encode_streamed(const Global& g, const std::strin
   ctx.progress = &progress;
   ctx.max_bytes = limit;
   fmf::Collective single;
+  // Runs the streamed SVD over `src` and fills the report (`wf`: where the chunks came from).
+  auto run = [&](const fmf::ChunkSource& src, const WorkFile& wf) -> Result<std::unique_ptr<Model>> {
+    const auto t0 = Clock::now();
+    BTFC_ASSIGN_OR_RETURN(StreamedEncode enc, encode_fmf_streamed(src, desc, params, ctx, single));
+    report = json{{"max_memory", limit},
+                  {"work_file", wf.path},
+                  {"work_file_built", wf.built},
+                  {"work_file_reused", wf.reused},
+                  {"work_file_seconds", wf.seconds},
+                  {"work_file_bytes", wf.bytes_written},
+                  {"work_file_scale", wf.scale},
+                  {"work_file_note", wf.note},
+                  {"chunks", src.num_chunks()},
+                  {"chunk_texels", src.chunk_count(0)},
+                  {"passes", enc.stats.passes},
+                  {"bytes_read", enc.stats.bytes_read},
+                  {"pass_seconds", enc.stats.pass_seconds},
+                  {"factorize_seconds", since(t0)},
+                  {"buffer_bytes", enc.stats.buffer_bytes}};
+    return std::move(enc.model);
+  };
   if (work_file.empty() && is_raw_btfc_file(in)) {
     // A raw .btfc is texel-major already: stream its data tensor in place, no working file.
     // Its chunk buffers take 12 bytes per value (float) instead of the working file's 10.
     const uint32_t raw_lines = stream_lines_per_chunk(desc, uint64_t(l), limit / 12 * 10);
     if (raw_lines > 0) {
       BTFC_ASSIGN_OR_RETURN(std::unique_ptr<fmf::ChunkSource> src, open_raw_chunks(in, raw_lines));
-      const auto t0 = Clock::now();
-      BTFC_ASSIGN_OR_RETURN(StreamedEncode enc, encode_fmf_streamed(*src, desc, params, ctx, single));
-      report = json{{"max_memory", limit},
-                    {"work_file", in},
-                    {"work_file_built", false},
-                    {"work_file_reused", false},
-                    {"work_file_seconds", 0.0},
-                    {"work_file_bytes", 0},
-                    {"work_file_scale", 1.0},
-                    {"work_file_note", "raw .btfc streamed in place (texel-major already): no working file"},
-                    {"chunks", src->num_chunks()},
-                    {"chunk_texels", src->chunk_count(0)},
-                    {"passes", enc.stats.passes},
-                    {"bytes_read", enc.stats.bytes_read},
-                    {"pass_seconds", enc.stats.pass_seconds},
-                    {"factorize_seconds", since(t0)},
-                    {"buffer_bytes", enc.stats.buffer_bytes}};
-      return std::move(enc.model);
+      WorkFile none;
+      none.path = in;
+      none.note = "raw .btfc streamed in place (texel-major already): no working file";
+      return run(*src, none);
     }
   }
   std::string work = work_file;
@@ -95,24 +102,9 @@ Result<std::unique_ptr<Model>> encode_streamed(const Global& g, const std::strin
   if (chunk_buffers + streaming_fixed_bytes(desc.abrdf_size(), desc.num_texels(), uint64_t(l)) > limit)
     return invalid_argument(wf.path + ": its chunks of " + std::to_string(file.chunk_count(0)) + " texels need " + format_bytes(chunk_buffers) +
                             " of buffers, more than --max-memory " + format_bytes(limit));
-  const auto t0 = Clock::now();
-  BTFC_ASSIGN_OR_RETURN(StreamedEncode enc, encode_fmf_streamed(file, desc, params, ctx, single));
-  report = json{{"max_memory", limit},
-                {"work_file", wf.path},
-                {"work_file_built", wf.built},
-                {"work_file_reused", wf.reused},
-                {"work_file_seconds", wf.seconds},
-                {"work_file_bytes", wf.bytes_written},
-                {"work_file_scale", wf.scale},
-                {"work_file_note", wf.note},
-                {"chunks", file.num_chunks()},
-                {"chunk_texels", file.chunk_count(0)},
-                {"passes", enc.stats.passes},
-                {"bytes_read", enc.stats.bytes_read},
-                {"pass_seconds", enc.stats.pass_seconds},
-                {"factorize_seconds", since(t0)},
-                {"buffer_bytes", enc.stats.buffer_bytes}};
-  return std::move(enc.model);
+  if (file.desc().abrdf_size() != desc.abrdf_size() || file.desc().num_texels() != desc.num_texels())
+    return invalid_argument(file.path() + ": working file shape (" + file.desc().summary() + ") differs from the BTF's (" + desc.summary() + ")");
+  return run(BdiChunkSource(file), wf);
 }
 
 void print_report(const json& r) {
