@@ -79,6 +79,14 @@ std::string device_summary();
 // "CL_OUT_OF_RESOURCES (-5)"
 std::string cl_error_name(cl_int err);
 
+// Sets kernel argument i to v; a failure is a device_error naming `what` and the CL error.
+template <class T>
+Status set_arg(cl_kernel k, int i, const T& v, const char* what = "clSetKernelArg") {
+  const cl_int e = clSetKernelArg(k, cl_uint(i), sizeof(T), &v);
+  if (e != CL_SUCCESS) return Status(StatusCode::device_error, std::string(what) + ": " + cl_error_name(e));
+  return {};
+}
+
 // A device buffer that releases itself.
 class Buffer {
  public:
@@ -107,3 +115,12 @@ class Buffer {
 };
 
 }  // namespace btfc::ocl
+
+// Returns a device_error naming `what` and the CL error from the enclosing function (returning
+// Status or Result) when an OpenCL call fails.
+#define BTFC_CL_CHECK(call, what)                                                                                    \
+  do {                                                                                                               \
+    const cl_int e_ = (call);                                                                                        \
+    if (e_ != CL_SUCCESS)                                                                                            \
+      return ::btfc::Status(::btfc::StatusCode::device_error, std::string(what) + ": " + ::btfc::ocl::cl_error_name(e_)); \
+  } while (0)

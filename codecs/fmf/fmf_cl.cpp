@@ -215,12 +215,6 @@ Result<std::shared_ptr<DeviceFactors>> DeviceFactors::upload(const PackedFactors
 
 namespace {
 
-#define BTFC_CL_CHECK(call, what)                                                                          \
-  do {                                                                                                     \
-    cl_int e_ = (call);                                                                                    \
-    if (e_ != CL_SUCCESS) return Status(StatusCode::device_error, std::string(what) + ": " + ocl::cl_error_name(e_)); \
-  } while (0)
-
 // Queries go in slices so each slice's buffers stay far below the device's allocation limit.
 constexpr size_t k_slice = size_t(1) << 22;
 

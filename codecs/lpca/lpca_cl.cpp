@@ -12,17 +12,7 @@
 namespace btfc::lpca_cl {
 namespace {
 
-#define BTFC_CL_CHECK(call, what)                                                                                      \
-  do {                                                                                                                 \
-    cl_int e_ = (call);                                                                                                \
-    if (e_ != CL_SUCCESS) return Status(StatusCode::device_error, std::string(what) + ": " + ocl::cl_error_name(e_)); \
-  } while (0)
-
-template <class T>
-Status set_arg(cl_kernel k, int i, const T& v, const char* name) {
-  BTFC_CL_CHECK(clSetKernelArg(k, cl_uint(i), sizeof(T), &v), name);
-  return {};
-}
+using ocl::set_arg;
 
 // Directions per lpca_project launch: a group's 8 texel chunks (32 KB) stay in L1 while it
 // runs through its candidates, each cluster's chunk (36 KB at 8 components) in L2.

@@ -10,19 +10,9 @@
 namespace btfc::lpyr {
 namespace {
 
-#define BTFC_CL_CHECK(call, what)                                                                                      \
-  do {                                                                                                                 \
-    cl_int e_ = (call);                                                                                                \
-    if (e_ != CL_SUCCESS) return Status(StatusCode::device_error, std::string(what) + ": " + ocl::cl_error_name(e_)); \
-  } while (0)
-
 constexpr size_t k_tile_bytes = size_t(256) << 20;
 
-template <class T>
-Status set_arg(cl_kernel k, int i, const T& v) {
-  BTFC_CL_CHECK(clSetKernelArg(k, cl_uint(i), sizeof(T), &v), "clSetKernelArg");
-  return {};
-}
+using ocl::set_arg;
 
 Status check_sizes(int w, int h, size_t d) {
   if (w <= 0 || h <= 0 || d == 0 || d > size_t(1) << 30 || size_t(w) * d * 4 * 3 > k_tile_bytes)

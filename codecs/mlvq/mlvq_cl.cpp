@@ -35,15 +35,9 @@ float dot_f(const float* a, const float* b, int n) {
   return s;
 }
 
-#define MLVQ_CL_CHECK(call, what)                                                                          \
-  do {                                                                                                     \
-    cl_int e_ = (call);                                                                                    \
-    if (e_ != CL_SUCCESS) return Status(StatusCode::device_error, std::string(what) + ": " + ocl::cl_error_name(e_)); \
-  } while (0)
-
 Status set_args(cl_kernel k, std::initializer_list<std::pair<const void*, size_t>> args) {
   cl_uint a = 0;
-  for (auto [p, n] : args) MLVQ_CL_CHECK(clSetKernelArg(k, a++, n, p), "clSetKernelArg");
+  for (auto [p, n] : args) BTFC_CL_CHECK(clSetKernelArg(k, a++, n, p), "clSetKernelArg");
   return {};
 }
 
@@ -100,7 +94,7 @@ Status ssim_search_cl(const SearchProblem& p, SearchResult& r) {
                                     {&m[4], sizeof(cl_mem)}, {&m[5], sizeof(cl_mem)}, {&B, 4}, {&K, 4}, {&dl, 4}, {&dc, 4},
                                     {&m[6], sizeof(cl_mem)}, {&m[7], sizeof(cl_mem)}, {&m[8], sizeof(cl_mem)}}));
   const size_t global = size_t(p.B);
-  MLVQ_CL_CHECK(clEnqueueNDRangeKernel(q, k, 1, nullptr, &global, nullptr, 0, nullptr, nullptr), "mlvq_ssim_search");
+  BTFC_CL_CHECK(clEnqueueNDRangeKernel(q, k, 1, nullptr, &global, nullptr, 0, nullptr, nullptr), "mlvq_ssim_search");
   BTFC_RETURN_IF_ERROR(bi.sync_to_host(q, size_t(p.B) * 4));
   BTFC_RETURN_IF_ERROR(bs.sync_to_host(q, size_t(p.B) * 4));
   BTFC_RETURN_IF_ERROR(bc.sync_to_host(q, size_t(p.B) * 4));
@@ -124,7 +118,7 @@ Status rgb_to_lrg_cl(std::span<const float> rgb, float* lrg) {
   cl_mem a = bi.get(), o = bo.get();
   const cl_int nn = cl_int(n);
   BTFC_RETURN_IF_ERROR(set_args(k, {{&a, sizeof(cl_mem)}, {&nn, 4}, {&o, sizeof(cl_mem)}}));
-  MLVQ_CL_CHECK(clEnqueueNDRangeKernel(q, k, 1, nullptr, &n, nullptr, 0, nullptr, nullptr), "mlvq_rgb_to_lrg");
+  BTFC_CL_CHECK(clEnqueueNDRangeKernel(q, k, 1, nullptr, &n, nullptr, 0, nullptr, nullptr), "mlvq_rgb_to_lrg");
   return bo.sync_to_host(q, n * 12);
 }
 
@@ -237,7 +231,7 @@ Status DeviceModel::eval(std::span<const int> texel, std::span<const float> coor
     BTFC_RETURN_IF_ERROR(set_args(k, {{&a0, sizeof(cl_mem)}, {&a1, sizeof(cl_mem)}, {&a2, sizeof(cl_mem)}, {&a3, sizeof(cl_mem)},
                                       {&a4, sizeof(cl_mem)}, {&nn, 4}, {&a6, sizeof(cl_mem)}}));
     const size_t local = 64, global = (n + local - 1) / local * local;
-    MLVQ_CL_CHECK(clEnqueueNDRangeKernel(q, k, 1, nullptr, &global, &local, 0, nullptr, nullptr), "mlvq_eval");
+    BTFC_CL_CHECK(clEnqueueNDRangeKernel(q, k, 1, nullptr, &global, &local, 0, nullptr, nullptr), "mlvq_eval");
     BTFC_RETURN_IF_ERROR(bo.sync_to_host(q, n * 12));
   }
   return {};
