@@ -80,7 +80,8 @@ Result<std::unique_ptr<Model>> encode_streamed(const Global& g, const std::strin
   };
   if (work_file.empty() && is_raw_btfc_file(in)) {
     // A raw .btfc is texel-major already: stream its data tensor in place, no working file.
-    // Its chunk buffers take 12 bytes per value (float) instead of the working file's 10.
+    // Its chunks are mapped (two at a time: 8 bytes per value); sized for 12, what the pread
+    // fallback (one float copy + two float blocks) needs, so either path fits the limit.
     const uint32_t raw_lines = stream_lines_per_chunk(desc, uint64_t(l), limit / 12 * 10);
     if (raw_lines > 0) {
       BTFC_ASSIGN_OR_RETURN(std::unique_ptr<fmf::ChunkSource> src, open_raw_chunks(in, raw_lines));

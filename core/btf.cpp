@@ -160,20 +160,36 @@ ImageView Btf::image(size_t l, size_t v) const {
   return iv;
 }
 
-Status Btf::check_finite(const std::string& what) const {
-  const size_t n = m_data.size();
-  for (size_t i = 0; i < n; ++i) {
-    if (!std::isfinite(m_data[i])) {
-      size_t texel = i / m_desc.abrdf_size(), row = i % m_desc.abrdf_size();
-      size_t c = row % m_desc.channels, lv = row / m_desc.channels;
-      std::ostringstream os;
-      os << what << ": non-finite value " << m_data[i] << " at texel (" << texel % m_desc.width << ", "
-         << texel / m_desc.width << "), light " << lv % m_desc.num_lights() << ", view " << lv / m_desc.num_lights()
-         << ", channel " << c;
-      return corrupt_data(os.str());
+size_t find_non_finite(const float* d, size_t n) {
+  // Exponent bits tested block by block without an early exit (so the loop vectorizes), blocks
+  // in parallel; only the first block holding a non-finite value is searched element-wise.
+  const size_t block = size_t(1) << 16, blocks = (n + block - 1) / block;
+  int64_t first = int64_t(blocks);
+#pragma omp parallel for reduction(min : first) schedule(static) if (blocks > 16)
+  for (int64_t b = 0; b < int64_t(blocks); ++b) {
+    uint32_t bad = 0;
+    for (size_t i = size_t(b) * block; i < std::min(n, size_t(b + 1) * block); ++i) {
+      uint32_t bits;
+      std::memcpy(&bits, d + i, 4);
+      bad |= uint32_t((bits & 0x7f800000u) == 0x7f800000u);
     }
+    if (bad) first = std::min(first, b);
   }
-  return {};
+  if (first == int64_t(blocks)) return n;
+  size_t i = size_t(first) * block;
+  while (std::isfinite(d[i])) ++i;
+  return i;
+}
+
+Status Btf::check_finite(const std::string& what) const {
+  const size_t n = m_data.size(), i = find_non_finite(m_data.data(), n);
+  if (i == n) return {};
+  const size_t texel = i / m_desc.abrdf_size(), row = i % m_desc.abrdf_size();
+  const size_t c = row % m_desc.channels, lv = row / m_desc.channels;
+  std::ostringstream os;
+  os << what << ": non-finite value " << m_data[i] << " at texel (" << texel % m_desc.width << ", " << texel / m_desc.width
+     << "), light " << lv % m_desc.num_lights() << ", view " << lv / m_desc.num_lights() << ", channel " << c;
+  return corrupt_data(os.str());
 }
 
 }  // namespace btfc

@@ -137,4 +137,8 @@ class Btf {
   FloatBuffer m_data;
 };
 
+// Index of the first non-finite value among v[0, n), or n when all are finite. Vectorized and
+// parallel over blocks: multi-GB inputs are checked on every read.
+size_t find_non_finite(const float* v, size_t n);
+
 }  // namespace btfc

@@ -144,4 +144,8 @@ Result<Btf> load_raw_btf(const ContainerReader& reader);
 // Version string of this build, stored in CODC.
 const char* btfc_version();
 
+// zlib's crc32 of n bytes continuing `crc`, for any n; buffers of 8 MiB and more are split over
+// the OpenMP threads (crc32_combine joins the pieces).
+uint32_t crc32_update(uint32_t crc, const void* p, uint64_t n);
+
 }  // namespace btfc

@@ -2,8 +2,10 @@
 #include "formats/btf_stream.h"
 
 #include <fcntl.h>
+#include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
+#include <omp.h>
 #include <zlib.h>
 
 #include <algorithm>
@@ -96,6 +98,8 @@ class RawBands {
   }
   const BtfDesc& desc() const { return m_desc; }
   const std::string& path() const { return m_path; }
+  int fd() const { return m_fd; }
+  uint64_t data_offset() const { return m_off; }  // file offset of the first value
   uint32_t crc_prefix() const { return m_crc; }  // CRC of the chunk head, before the data
   uint32_t crc_want() const { return m_crc_want; }
   // Texels [t0, t0 + n) at any position, no CRC (RawChunks keeps its own).
@@ -107,20 +111,16 @@ class RawBands {
     if (t0 != m_next) return invalid_argument(m_path + ": raw bands must be read in order");
     const uint64_t bytes = n * m_desc.abrdf_size() * 4;
     BTFC_RETURN_IF_ERROR(pread_all(dst, bytes, m_off + t0 * m_desc.abrdf_size() * 4));
-    for (uint64_t done = 0; done < bytes;) {
-      const uInt k = uInt(std::min<uint64_t>(bytes - done, uint64_t(1) << 30));
-      m_crc = uint32_t(crc32(m_crc, reinterpret_cast<const Bytef*>(dst) + done, k));
-      done += k;
-    }
+    m_crc = crc32_update(m_crc, dst, bytes);
     m_next = t0 + n;
     if (m_next == m_desc.num_texels() && m_crc != m_crc_want)
       return corrupt_data(m_path + ": chunk TNSR 'data': CRC mismatch (the file is corrupt)");
-    for (uint64_t i = 0; i < n * m_desc.abrdf_size(); ++i)
-      if (!std::isfinite(dst[i])) {
-        const uint64_t t = t0 + i / m_desc.abrdf_size();
-        return corrupt_data(m_path + ": non-finite value at texel (" + std::to_string(t % uint64_t(m_desc.width)) + ", " +
-                            std::to_string(t / uint64_t(m_desc.width)) + ")");
-      }
+    const size_t values = size_t(n * m_desc.abrdf_size()), i = find_non_finite(dst, values);
+    if (i < values) {
+      const uint64_t t = t0 + i / m_desc.abrdf_size();
+      return corrupt_data(m_path + ": non-finite value at texel (" + std::to_string(t % uint64_t(m_desc.width)) + ", " +
+                          std::to_string(t / uint64_t(m_desc.width)) + ")");
+    }
     return {};
   }
 
@@ -143,15 +143,52 @@ class RawBands {
   uint32_t m_crc = 0, m_crc_want = 0;
 };
 
+// crc32 of v[0, n) continuing `crc`, and (when bad is given) the index of the first non-finite
+// value in *bad (n when none). Each thread takes a contiguous piece and walks it in 256 KiB
+// blocks, testing each block while it is in cache and then CRC-ing it: one trip through memory
+// instead of two, which is most of the cost of the first pass over a mapped multi-GB tensor.
+uint32_t crc_and_check(uint32_t crc, const float* v, size_t n, size_t* bad) {
+  const int threads = std::max(1, omp_get_max_threads());
+  const size_t piece = (n + size_t(threads) - 1) / size_t(threads), block = size_t(1) << 16;
+  std::vector<uint32_t> part(size_t(threads), 0);
+  std::vector<size_t> first(size_t(threads), n);
+#pragma omp parallel for schedule(static, 1) num_threads(threads)
+  for (int t = 0; t < threads; ++t) {
+    const size_t a = std::min(n, size_t(t) * piece), b = std::min(n, a + piece);
+    uint32_t c = 0;
+    for (size_t i0 = a; i0 < b; i0 += block) {
+      const size_t k = std::min(block, b - i0);
+      if (bad && first[size_t(t)] == n) {
+        const size_t i = find_non_finite(v + i0, k);
+        if (i < k) first[size_t(t)] = i0 + i;
+      }
+      c = crc32_update(c, v + i0, k * 4);
+    }
+    part[size_t(t)] = c;
+  }
+  for (int t = 0; t < threads; ++t) {
+    const size_t a = std::min(n, size_t(t) * piece), b = std::min(n, a + piece);
+    if (b > a) crc = uint32_t(crc32_combine(crc, part[size_t(t)], z_off_t((b - a) * 4)));
+  }
+  if (bad) *bad = *std::min_element(first.begin(), first.end());
+  return crc;
+}
+
 // A raw .btfc read in place as column chunks of B for the streamed SVD: its data tensor is
-// texel-major already (each texel's ABRDF contiguous), so no working file is needed. The tensor
-// CRC is accumulated over the first in-order sweep (pass 0 reads every chunk in order) and
-// checked when that sweep completes; decode() checks values are finite.
+// texel-major already (each texel's ABRDF contiguous), so no working file is needed, and the
+// chunks are mapped, not copied: the GEMMs read the page cache directly (no pread copy, no
+// decode), which is what keeps out-of-core passes near in-core speed. The tensor CRC is
+// accumulated over the first in-order sweep (pass 0 maps every chunk in order) and checked when
+// that sweep completes; each chunk's values are checked finite the first time it is seen.
+// (A file truncated by another process while mapped would raise SIGBUS; its size is checked
+// at open.) A tensor at an offset not aligned for floats falls back to pread + copy.
 class RawChunks final : public fmf::ChunkSource {
  public:
   RawChunks(RawBands b, uint64_t per_chunk) : m_b(std::move(b)), m_per(per_chunk), m_crc(m_b.crc_prefix()) {
     const uint64_t n = m_b.desc().num_texels();
     m_chunks = (n + m_per - 1) / m_per;
+    m_checked.assign(m_chunks, 0);
+    m_page = uint64_t(::sysconf(_SC_PAGESIZE));
   }
   size_t rows() const override { return m_b.desc().abrdf_size(); }
   size_t num_chunks() const override { return m_chunks; }
@@ -160,37 +197,59 @@ class RawChunks final : public fmf::ChunkSource {
   size_t raw_bytes(size_t c) const override { return chunk_count(c) * rows() * 4; }
   Status read(size_t c, void* raw) const override {
     BTFC_RETURN_IF_ERROR(m_b.pread_texels(chunk_first(c), chunk_count(c), static_cast<float*>(raw)));
-    std::lock_guard<std::mutex> lock(m_mutex);
-    if (c != m_next) return {};
-    const uint64_t bytes = raw_bytes(c);
-    for (uint64_t done = 0; done < bytes;) {
-      const uInt k = uInt(std::min<uint64_t>(bytes - done, uint64_t(1) << 30));
-      m_crc = uint32_t(crc32(m_crc, static_cast<const Bytef*>(raw) + done, k));
-      done += k;
-    }
-    if (++m_next == m_chunks && m_crc != m_b.crc_want())
-      return corrupt_data(m_b.path() + ": chunk TNSR 'data': CRC mismatch (the file is corrupt)");
-    return {};
+    return verify(c, static_cast<const float*>(raw));
   }
   Status decode(size_t c, const void* raw, float* dst) const override {
-    const size_t n = chunk_count(c) * rows();
-    const float* src = static_cast<const float*>(raw);
-    for (size_t i = 0; i < n; ++i)
-      if (!std::isfinite(src[i])) {
-        const uint64_t t = chunk_first(c) + i / rows();
-        return corrupt_data(m_b.path() + ": non-finite value at texel (" + std::to_string(t % uint64_t(m_b.desc().width)) + ", " +
-                            std::to_string(t / uint64_t(m_b.desc().width)) + ")");
-      }
-    std::memcpy(dst, src, n * sizeof(float));
+    std::memcpy(dst, raw, raw_bytes(c));
     return {};
+  }
+  bool mappable() const override { return m_b.data_offset() % alignof(float) == 0; }
+  Result<const float*> map(size_t c) const override {
+    const uint64_t off = chunk_offset(c), base = off / m_page * m_page;
+    void* p = ::mmap(nullptr, size_t(raw_bytes(c) + (off - base)), PROT_READ, MAP_SHARED | MAP_POPULATE, m_b.fd(), off_t(base));
+    if (p == MAP_FAILED) return io_error(m_b.path() + ": cannot map texel chunk " + std::to_string(c) + " (" + std::strerror(errno) + ")");
+    const float* f = reinterpret_cast<const float*>(static_cast<const uint8_t*>(p) + (off - base));
+    Status s = verify(c, f);
+    if (!s.ok()) {
+      unmap(c, f);
+      return s;
+    }
+    return f;
+  }
+  void unmap(size_t c, const float* f) const override {
+    const uint64_t off = chunk_offset(c), base = off / m_page * m_page;
+    ::munmap(const_cast<uint8_t*>(reinterpret_cast<const uint8_t*>(f)) - (off - base), size_t(raw_bytes(c) + (off - base)));
   }
 
  private:
+  uint64_t chunk_offset(size_t c) const { return m_b.data_offset() + uint64_t(chunk_first(c)) * rows() * 4; }
+  // First sight of chunk c: values finite; in-order sweep from chunk 0: the tensor CRC. When
+  // both are due they share one trip through memory (crc_and_check).
+  Status verify(size_t c, const float* v) const {
+    std::lock_guard<std::mutex> lock(m_mutex);
+    const size_t n = chunk_count(c) * rows();
+    const bool crc = c == m_next;
+    size_t bad = n;
+    if (crc)
+      m_crc = crc_and_check(m_crc, v, n, m_checked[c] ? nullptr : &bad);
+    else if (!m_checked[c])
+      bad = find_non_finite(v, n);
+    if (bad < n) {
+      const uint64_t t = chunk_first(c) + bad / rows();
+      return corrupt_data(m_b.path() + ": non-finite value at texel (" + std::to_string(t % uint64_t(m_b.desc().width)) + ", " +
+                          std::to_string(t / uint64_t(m_b.desc().width)) + ")");
+    }
+    m_checked[c] = 1;
+    if (crc && ++m_next == m_chunks && m_crc != m_b.crc_want())
+      return corrupt_data(m_b.path() + ": chunk TNSR 'data': CRC mismatch (the file is corrupt)");
+    return {};
+  }
   RawBands m_b;
-  uint64_t m_per = 1, m_chunks = 0;
+  uint64_t m_per = 1, m_chunks = 0, m_page = 4096;
   mutable std::mutex m_mutex;
   mutable uint64_t m_next = 0;
   mutable uint32_t m_crc = 0;
+  mutable std::vector<uint8_t> m_checked;
 };
 
 // Rows of texels per band for `bytes_per_value` bytes of buffer per value within max_bytes.

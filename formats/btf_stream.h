@@ -27,9 +27,10 @@ namespace btfc {
 Result<BtfDesc> probe_btf(const std::string& path);
 
 // A raw .btfc is texel-major already: the streamed SVD reads its data tensor in place, in
-// chunks of `lines_per_chunk` scan lines, with no working file (CRC checked over the first
-// in-order sweep, values checked finite). Chunk buffers: 12 bytes per value (one raw float
-// chunk + two float blocks), against 10 for a half working file.
+// chunks of `lines_per_chunk` scan lines, with no working file. Chunks are mapped from the page
+// cache (no copy, no decode; two mapped at a time: 8 bytes per value), or read into buffers
+// (12 bytes per value) when the tensor is not float-aligned. The tensor CRC is checked over the
+// first in-order sweep, each chunk's values checked finite when first seen.
 bool is_raw_btfc_file(const std::string& path);
 Result<std::unique_ptr<fmf::ChunkSource>> open_raw_chunks(const std::string& path, uint32_t lines_per_chunk);
 

@@ -1,6 +1,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
+#include <vector>
 
 #include "codecs/codec.h"
 #include "core/btf.h"
@@ -110,4 +112,18 @@ TEST(DecodeRequest, ResolvesSubsetsAndRejectsBadOnes) {
   q.width = 3;
   q.views = {3};
   EXPECT_NE(resolve_request(d, q).status().message().find("view index 3"), std::string::npos);
+}
+
+// find_non_finite: first NaN / Inf over many blocks (the parallel, vectorized path), none, and
+// a value in the last partial block.
+TEST(Btf, FindNonFiniteFindsTheFirstOne) {
+  std::vector<float> v((size_t(1) << 16) * 40 + 7, 0.5f);
+  EXPECT_EQ(btfc::find_non_finite(v.data(), v.size()), v.size());
+  v[v.size() - 1] = -INFINITY;
+  EXPECT_EQ(btfc::find_non_finite(v.data(), v.size()), v.size() - 1);
+  v[(size_t(1) << 16) * 23 + 5] = NAN;
+  v[(size_t(1) << 16) * 31] = INFINITY;
+  EXPECT_EQ(btfc::find_non_finite(v.data(), v.size()), (size_t(1) << 16) * 23 + 5);
+  v[3] = std::numeric_limits<float>::max();  // finite
+  EXPECT_EQ(btfc::find_non_finite(v.data(), 100), size_t(100));
 }

@@ -747,3 +747,15 @@ TEST(TensorTest, Conversions) {
 
 }  // namespace
 }  // namespace btfc
+
+// Big buffers take the parallel CRC (pieces joined by crc32_combine): the same value as zlib's
+// crc32 in one call, continuing a previous CRC, at sizes that do not split evenly.
+TEST(ContainerCrc, ParallelCrcEqualsZlib) {
+  std::vector<uint8_t> buf((size_t(20) << 20) + 13);
+  uint32_t x = 12345;
+  for (auto& b : buf) b = uint8_t((x = x * 1103515245u + 12345u) >> 16);
+  for (size_t n : {size_t(100), size_t(8) << 20, buf.size()}) {
+    const uint32_t seed = uint32_t(crc32(0, reinterpret_cast<const Bytef*>("head"), 4));
+    EXPECT_EQ(btfc::crc32_update(seed, buf.data(), n), uint32_t(crc32(seed, buf.data(), uInt(n)))) << n;
+  }
+}

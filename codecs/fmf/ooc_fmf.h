@@ -31,6 +31,9 @@ class BdiChunkSource final : public fmf::ChunkSource {
   Status decode(size_t c, const void* raw, float* dst) const override {
     return m_f.decode(c, static_cast<const uint16_t*>(raw), dst);
   }
+  // Mapped and decoded straight from the page cache: no raw half buffer.
+  Status load(size_t c, void*, float* dst) const override { return m_f.read_decoded(c, dst); }
+  size_t raw_buffer_bytes(size_t) const override { return 0; }
 
  private:
   const BdiChunks& m_f;

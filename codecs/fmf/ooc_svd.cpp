@@ -47,29 +47,37 @@ struct Buffers {
   std::vector<float> block[2];
 };
 
-// Reads and decodes the owned chunks in order on a helper thread, one chunk ahead of `fn`,
-// which multiplies the previous one. The helper does all the I/O and the conversion, so the
+// Reads and decodes (or maps) the owned chunks in order on a helper thread, one chunk ahead of
+// `fn`, which multiplies the previous one. The helper does all the I/O and the conversion, so the
 // main thread only runs GEMMs (no OpenMP region between them whose spinning threads would
 // compete with the BLAS threads). Stops at the first failure (after the helper finished).
 Status for_each_chunk(const ChunkSource& src, const std::vector<size_t>& chunks, Buffers& b, StreamStats& st,
                       const std::function<void(size_t c, const float* B, size_t count)>& fn) {
   if (chunks.empty()) return {};
+  const bool mapped = src.mappable();
   auto load = [&](size_t i) {
-    return std::async(std::launch::async, [&src, &b, &chunks, i] {
-      Status s = src.read(chunks[i], b.raw.data());
-      return s.ok() ? src.decode(chunks[i], b.raw.data(), b.block[i % 2].data()) : s;
+    return std::async(std::launch::async, [&src, &b, &chunks, i, mapped]() -> Result<const float*> {
+      if (mapped) return src.map(chunks[i]);
+      float* dst = b.block[i % 2].data();
+      Status s = src.load(chunks[i], b.raw.empty() ? nullptr : b.raw.data(), dst);
+      if (!s.ok()) return s;
+      return static_cast<const float*>(dst);
     });
   };
-  std::future<Status> next = load(0);
+  std::future<Result<const float*>> next = load(0);
   for (size_t i = 0; i < chunks.size(); ++i) {
-    Status s = next.get();
-    if (i + 1 < chunks.size() && s.ok()) next = load(i + 1);
-    if (!s.ok()) {
-      if (next.valid()) (void)next.get();
-      return s;
+    Result<const float*> cur = next.get();
+    if (i + 1 < chunks.size() && cur.ok()) next = load(i + 1);
+    if (!cur.ok()) {
+      if (next.valid()) {
+        Result<const float*> other = next.get();
+        if (mapped && other.ok()) src.unmap(chunks[i + 1], *other);
+      }
+      return cur.status();
     }
     st.bytes_read += src.raw_bytes(chunks[i]);
-    fn(chunks[i], b.block[i % 2].data(), src.chunk_count(chunks[i]));
+    fn(chunks[i], *cur, src.chunk_count(chunks[i]));
+    if (mapped) src.unmap(chunks[i], *cur);
   }
   return {};
 }
@@ -92,16 +100,20 @@ Result<SvdResult> streaming_svd(const ChunkSource& src, const std::vector<size_t
   StreamStats st;
   Buffers b;
   size_t max_raw = 0, max_count = 0;
-  for (size_t c : chunks) max_raw = std::max(max_raw, src.raw_bytes(c)), max_count = std::max(max_count, src.chunk_count(c));
+  for (size_t c : chunks) max_raw = std::max(max_raw, src.raw_buffer_bytes(c)), max_count = std::max(max_count, src.chunk_count(c));
   Status local;
-  try {
-    b.raw.resize(max_raw);
-    b.block[0].resize(max_count * m);
-    b.block[1].resize(max_count * m);
-  } catch (const std::bad_alloc&) {
-    local = io_error("out of memory allocating the chunk buffers (" + std::to_string(max_raw + 8 * max_count * m) + " bytes)");
+  if (src.mappable()) {
+    st.buffer_bytes = 2 * 4 * max_count * m;  // two mapped float chunks
+  } else {
+    try {
+      b.raw.resize(max_raw);
+      b.block[0].resize(max_count * m);
+      b.block[1].resize(max_count * m);
+    } catch (const std::bad_alloc&) {
+      local = io_error("out of memory allocating the chunk buffers (" + std::to_string(max_raw + 8 * max_count * m) + " bytes)");
+    }
+    st.buffer_bytes = max_raw + 8 * max_count * m;
   }
-  st.buffer_bytes = max_raw + 8 * max_count * m;
   const int total_passes = opt.power_iters + 2;
   if (opt.progress) opt.progress->start("fmf out-of-core SVD", uint64_t(total_passes) * chunks.size());
 

@@ -22,7 +22,7 @@
 // Sums run in double, so the result equals the single-process one up to float rounding.
 //
 // Memory: one raw chunk buffer and two float chunks (a helper thread reads and decodes the next
-// chunk while the current one is multiplied) + O((m + n_local) l) for Y, Q and W^T. The caller sizes
+// chunk while the current one is multiplied), or two mapped chunks for a mappable source, + O((m + n_local) l) for Y, Q and W^T. The caller sizes
 // chunks so this stays under its limit (ooc_fmf.h).
 #pragma once
 #include <cstdint>
@@ -47,6 +47,20 @@ class ChunkSource {
   virtual size_t raw_bytes(size_t c) const = 0;    // bytes read() fetches
   virtual Status read(size_t c, void* raw) const = 0;
   virtual Status decode(size_t c, const void* raw, float* dst) const = 0;
+  // read() then decode() into dst; a source may do both at once without the raw buffer (then
+  // raw_buffer_bytes() is 0 and `raw` is null).
+  virtual Status load(size_t c, void* raw, float* dst) const {
+    Status s = read(c, raw);
+    return s.ok() ? decode(c, raw, dst) : s;
+  }
+  virtual size_t raw_buffer_bytes(size_t c) const { return raw_bytes(c); }
+  // Zero-copy alternative to read() + decode(): a source whose file holds chunk c as a float
+  // column block already may map it instead. When mappable(), streaming_svd allocates no chunk
+  // buffers; it calls map() on the helper thread (at most two chunks mapped at once) and
+  // unmap() once the chunk is multiplied. Both thread-safe.
+  virtual bool mappable() const { return false; }
+  virtual Result<const float*> map(size_t c) const { return unsupported("this chunk source cannot map chunks"); }
+  virtual void unmap(size_t c, const float* p) const {}
   size_t texels() const { return num_chunks() ? chunk_first(num_chunks() - 1) + chunk_count(num_chunks() - 1) : 0; }
 };
 

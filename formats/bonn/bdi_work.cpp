@@ -2,12 +2,14 @@
 #include "formats/bonn/bdi_work.h"
 
 #include <fcntl.h>
+#include <sys/mman.h>
 #include <unistd.h>
 #include <immintrin.h>
 
 #include <Imath/half.h>
 #include <cmath>
 #include <cstring>
+#include <vector>
 #include <limits>
 
 #include "formats/bonn/bonn_io.h"
@@ -42,18 +44,27 @@ float floats_to_half(const float* src, size_t n, float inv_scale, uint16_t* dst)
   return nan ? std::numeric_limits<float>::quiet_NaN() : mx;
 }
 
-void half_to_floats(const uint16_t* src, size_t n, float scale, float* dst) {
+bool half_to_floats(const uint16_t* src, size_t n, float scale, float* dst) {
   size_t i = 0;
+  uint16_t bad = 0;  // a half NaN / Inf has all exponent bits set
 #ifdef __F16C__
   const __m256 vs = _mm256_set1_ps(scale);
-  for (; i + 8 <= n; i += 8)
-    _mm256_storeu_ps(dst + i, _mm256_mul_ps(_mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(src + i))), vs));
+  const __m128i exp = _mm_set1_epi16(0x7c00);
+  __m128i vbad = _mm_setzero_si128();
+  for (; i + 8 <= n; i += 8) {
+    const __m128i h = _mm_loadu_si128(reinterpret_cast<const __m128i*>(src + i));
+    vbad = _mm_or_si128(vbad, _mm_cmpeq_epi16(_mm_and_si128(h, exp), exp));
+    _mm256_storeu_ps(dst + i, _mm256_mul_ps(_mm256_cvtph_ps(h), vs));
+  }
+  bad = uint16_t(_mm_movemask_epi8(vbad));
 #endif
   for (; i < n; ++i) {
+    bad |= uint16_t((src[i] & 0x7c00) == 0x7c00);
     Imath::half h;
     h.setBits(src[i]);
     dst[i] = float(h) * scale;
   }
+  return bad == 0;
 }
 
 // ---- BdiWriter ----
@@ -253,16 +264,28 @@ Status BdiChunks::read_raw(uint64_t c, uint16_t* dst) const {
 
 Status BdiChunks::decode(uint64_t c, const uint16_t* raw, float* dst) const {
   const size_t n = size_t(chunk_count(c)) * m_desc.abrdf_size();
-  half_to_floats(raw, n, m_scale, dst);
-  // Half NaN / Inf have all exponent bits set.
-  for (size_t i = 0; i < n; ++i)
-    if ((raw[i] & 0x7c00) == 0x7c00) {
-      const uint64_t t = chunk_first(c) + i / m_desc.abrdf_size();
-      return corrupt_data(m_path + ": BDI chunk " + std::to_string(c) + " holds a non-finite value at texel (" +
-                          std::to_string(t % uint64_t(m_desc.width)) + ", " + std::to_string(t / uint64_t(m_desc.width)) + "), row " +
-                          std::to_string(i % m_desc.abrdf_size()));
-    }
-  return {};
+  if (half_to_floats(raw, n, m_scale, dst)) return {};
+  size_t i = 0;  // a half NaN / Inf has all exponent bits set
+  while ((raw[i] & 0x7c00) != 0x7c00) ++i;
+  const uint64_t t = chunk_first(c) + i / m_desc.abrdf_size();
+  return corrupt_data(m_path + ": BDI chunk " + std::to_string(c) + " holds a non-finite value at texel (" +
+                      std::to_string(t % uint64_t(m_desc.width)) + ", " + std::to_string(t / uint64_t(m_desc.width)) + "), row " +
+                      std::to_string(i % m_desc.abrdf_size()));
+}
+
+Status BdiChunks::read_decoded(uint64_t c, float* dst) const {
+  if (c >= m_chunks) return invalid_argument(m_path + ": BDI chunk " + std::to_string(c) + " does not exist");
+  const uint64_t full = m_per_chunk * m_desc.abrdf_size() * 2, off = m_data0 + c * (4 + full) + 4;
+  const uint64_t page = uint64_t(::sysconf(_SC_PAGESIZE)), base = off / page * page, len = chunk_bytes(c) + (off - base);
+  void* p = off % 2 ? MAP_FAILED : ::mmap(nullptr, size_t(len), PROT_READ, MAP_SHARED | MAP_POPULATE, *m_fd, off_t(base));
+  if (p == MAP_FAILED) {  // odd offset (foreign file) or no mmap: read and decode a copy
+    std::vector<uint16_t> raw(size_t(chunk_bytes(c) / 2));
+    BTFC_RETURN_IF_ERROR(read_raw(c, raw.data()));
+    return decode(c, raw.data(), dst);
+  }
+  Status s = decode(c, reinterpret_cast<const uint16_t*>(static_cast<const uint8_t*>(p) + (off - base)), dst);
+  ::munmap(p, size_t(len));
+  return s;
 }
 
 }  // namespace btfc

@@ -18,7 +18,7 @@
 // BdiChunks multiplies it back. Foreign BDI files have scale 1 (values as stored).
 //
 // Contracts: errors name the file and the chunk; the writer removes its file unless finish()
-// succeeded; BdiChunks::read_raw / decode are const and thread-safe (pread).
+// succeeded; BdiChunks::read_raw / decode / read_decoded are const and thread-safe (pread, mmap).
 #pragma once
 #include <cstdint>
 #include <memory>
@@ -92,6 +92,9 @@ class BdiChunks {
   // Half -> float times scale, chunk_count(c) * abrdf_size values; a NaN / Inf is corrupt_data
   // naming the file, the chunk and the texel.
   Status decode(uint64_t c, const uint16_t* raw, float* dst) const;
+  // read_raw + decode without the raw buffer: the chunk is mapped (page cache, no copy),
+  // decoded into dst and unmapped.
+  Status read_decoded(uint64_t c, float* dst) const;
 
  private:
   std::string m_path, m_xml;
@@ -101,8 +104,9 @@ class BdiChunks {
   float m_scale = 1;
 };
 
-// Half <-> float for n values (F16C when compiled for it). to_half returns the largest |x|.
+// Half <-> float for n values (F16C when compiled for it). to_half returns the largest |x|;
+// to_floats returns false when a value is a half NaN or Inf (converted all the same).
 float floats_to_half(const float* src, size_t n, float inv_scale, uint16_t* dst);
-void half_to_floats(const uint16_t* src, size_t n, float scale, float* dst);
+bool half_to_floats(const uint16_t* src, size_t n, float scale, float* dst);
 
 }  // namespace btfc

@@ -1,0 +1,121 @@
+// A raw .btfc streamed in place (formats/btf_stream.h open_raw_chunks): mapped chunks hold the
+// file's values, the mapped factorization equals the copying one bit for bit, and a NaN or a
+// flipped bit in the file is an error naming it, whichever way the chunks are fetched.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <iterator>
+#include <limits>
+
+#include "codecs/fmf/ooc_svd.h"
+#include "core/synth.h"
+#include "formats/btf_io.h"
+#include "formats/btf_stream.h"
+
+using namespace btfc;
+
+namespace {
+
+std::string tmp_path(const std::string& name) { return ::testing::TempDir() + "/rawchunks_" + std::to_string(::getpid()) + "_" + name; }
+
+Btf synth(int w, int h) {
+  SynthOptions o;
+  o.width = w, o.height = h;
+  o.views = DirectionSet::single(dir_from_theta_phi(0.5, 1.0));
+  o.views.dirs.push_back(dir_from_theta_phi(0.9, 2.0));
+  return synthesize_btf(o).value();
+}
+
+// The same chunks through read() + decode(): what the mapped path replaces.
+class Copying final : public fmf::ChunkSource {
+ public:
+  explicit Copying(const fmf::ChunkSource& s) : m_s(s) {}
+  size_t rows() const override { return m_s.rows(); }
+  size_t num_chunks() const override { return m_s.num_chunks(); }
+  size_t chunk_first(size_t c) const override { return m_s.chunk_first(c); }
+  size_t chunk_count(size_t c) const override { return m_s.chunk_count(c); }
+  size_t raw_bytes(size_t c) const override { return m_s.raw_bytes(c); }
+  Status read(size_t c, void* raw) const override { return m_s.read(c, raw); }
+  Status decode(size_t c, const void* raw, float* dst) const override { return m_s.decode(c, raw, dst); }
+
+ private:
+  const fmf::ChunkSource& m_s;
+};
+
+// Overwrites the first occurrence of `marker`'s bytes in the file with `value`'s.
+void patch_float(const std::string& path, float marker, float value) {
+  std::fstream io(path, std::ios::in | std::ios::out | std::ios::binary);
+  std::string bytes{std::istreambuf_iterator<char>(io), {}};
+  const size_t at = bytes.find(std::string(reinterpret_cast<const char*>(&marker), 4));
+  ASSERT_NE(at, std::string::npos);
+  io.clear();
+  io.seekp(std::streamoff(at));
+  io.write(reinterpret_cast<const char*>(&value), 4);
+}
+
+fmf::SvdOptions options() {
+  fmf::SvdOptions opt;
+  opt.max_rank = 6, opt.oversample = 4, opt.power_iters = 1, opt.method = fmf::SvdMethod::randomized;
+  return opt;
+}
+
+}  // namespace
+
+TEST(RawChunks, MappedChunksHoldTheFileAndFactorizeAsTheCopies) {
+  const Btf b = synth(10, 7);
+  const std::string path = tmp_path("a.btfc");
+  ASSERT_TRUE(write_btf(b, path).ok());
+  auto src = open_raw_chunks(path, 2);  // 4 chunks of 2 scan lines, the last one short
+  ASSERT_TRUE(src.ok()) << src.status().message();
+  const fmf::ChunkSource& s = *src.value();
+  ASSERT_TRUE(s.mappable());
+  ASSERT_EQ(s.num_chunks(), 4u);
+  for (size_t c = 0; c < s.num_chunks(); ++c) {
+    auto p = s.map(c);
+    ASSERT_TRUE(p.ok()) << p.status().message();
+    EXPECT_EQ(std::memcmp(*p, b.abrdf(s.chunk_first(c)), s.raw_bytes(c)), 0) << "chunk " << c;
+    s.unmap(c, *p);
+  }
+  fmf::Collective one;
+  auto mapped = fmf::streaming_svd(s, fmf::owned_chunks(s, 0, 1), options(), one);
+  ASSERT_TRUE(mapped.ok()) << mapped.status().message();
+  auto again = open_raw_chunks(path, 2);
+  ASSERT_TRUE(again.ok());
+  Copying copying(*again.value());
+  ASSERT_FALSE(copying.mappable());
+  auto copied = fmf::streaming_svd(copying, fmf::owned_chunks(copying, 0, 1), options(), one);
+  ASSERT_TRUE(copied.ok()) << copied.status().message();
+  EXPECT_EQ(mapped->U, copied->U);
+  EXPECT_EQ(mapped->SxV, copied->SxV);
+  EXPECT_GT(mapped->S(0), 0.0f);
+  std::remove(path.c_str());
+}
+
+TEST(RawChunks, NaNAndFlippedBitAreErrorsWhetherMappedOrCopied) {
+  Btf b = synth(10, 7);
+  const float marker = 0.123456789f;
+  const uint64_t texel = 6 * 10 + 3;  // (3, 6): in the last chunk
+  b.abrdf(texel)[5] = marker;
+  for (const char* kind : {"nan", "flip"}) {
+    const std::string path = tmp_path(std::string(kind) + ".btfc");
+    ASSERT_TRUE(write_btf(b, path).ok());
+    patch_float(path, marker, std::string(kind) == "nan" ? std::numeric_limits<float>::quiet_NaN() : 0.5f);
+    for (bool map : {true, false}) {
+      auto src = open_raw_chunks(path, 2);
+      ASSERT_TRUE(src.ok()) << src.status().message();
+      Copying copying(*src.value());
+      const fmf::ChunkSource& s = map ? *src.value() : static_cast<const fmf::ChunkSource&>(copying);
+      fmf::Collective one;
+      auto r = fmf::streaming_svd(s, fmf::owned_chunks(s, 0, 1), options(), one);
+      ASSERT_FALSE(r.ok()) << kind << (map ? " mapped" : " copied");
+      EXPECT_EQ(r.status().code(), StatusCode::corrupt_data);
+      const std::string want = std::string(kind) == "nan" ? "non-finite value at texel (3, 6)" : "CRC mismatch";
+      EXPECT_NE(r.status().message().find(want), std::string::npos) << r.status().message();
+      EXPECT_NE(r.status().message().find(path), std::string::npos) << r.status().message();
+    }
+    std::remove(path.c_str());
+  }
+}
