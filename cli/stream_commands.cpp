@@ -45,12 +45,11 @@ Result<std::unique_ptr<Model>> encode_streamed(const Global& g, const std::strin
   if (std::string(codec->name()) != "fmf")
     return invalid_argument(in + ": the BTF (" + need + " as float32) does not fit in --max-memory " + format_bytes(limit) +
                             "; only fmf compresses out of core (" + codec->name() + " needs it in memory)");
-  BTFC_ASSIGN_OR_RETURN(int l, streaming_sketch_width(params));
-  const uint32_t lines = stream_lines_per_chunk(desc, uint64_t(l), limit);
+  BTFC_ASSIGN_OR_RETURN(StreamPlan plan, plan_streamed_fmf(params, desc, limit));
+  const uint32_t lines = stream_lines_per_chunk(desc, plan, limit);
   if (lines == 0)
     return invalid_argument("--max-memory " + format_bytes(limit) + " is too small for " + desc.summary() + ": streaming needs at least " +
-                            format_bytes(streaming_fixed_bytes(desc.abrdf_size(), desc.num_texels(), uint64_t(l)) +
-                                         k_stream_bytes_per_value * desc.abrdf_size() * uint64_t(desc.width)));
+                            format_bytes(plan.fixed_bytes + k_stream_bytes_per_value * desc.abrdf_size() * uint64_t(desc.width)));
   Progress progress(g.quiet || g.json);
   Context ctx;
   ctx.seed = seed;
@@ -82,7 +81,7 @@ Result<std::unique_ptr<Model>> encode_streamed(const Global& g, const std::strin
     // A raw .btfc is texel-major already: stream its data tensor in place, no working file.
     // Its chunks are mapped (two at a time: 8 bytes per value); sized for 12, what the pread
     // fallback (one float copy + two float blocks) needs, so either path fits the limit.
-    const uint32_t raw_lines = stream_lines_per_chunk(desc, uint64_t(l), limit / 12 * 10);
+    const uint32_t raw_lines = stream_lines_per_chunk(desc, plan, limit / 12 * 10);
     if (raw_lines > 0) {
       BTFC_ASSIGN_OR_RETURN(std::unique_ptr<fmf::ChunkSource> src, open_raw_chunks(in, raw_lines));
       WorkFile none;
@@ -100,7 +99,7 @@ Result<std::unique_ptr<Model>> encode_streamed(const Global& g, const std::strin
   if (!wf.note.empty() && !g.quiet && !g.json) std::cerr << "note: " << wf.note << "\n";
   BTFC_ASSIGN_OR_RETURN(BdiChunks file, BdiChunks::open(wf.path));
   const uint64_t chunk_buffers = k_stream_bytes_per_value * desc.abrdf_size() * file.chunk_count(0);
-  if (chunk_buffers + streaming_fixed_bytes(desc.abrdf_size(), desc.num_texels(), uint64_t(l)) > limit)
+  if (chunk_buffers + plan.fixed_bytes > limit)
     return invalid_argument(wf.path + ": its chunks of " + std::to_string(file.chunk_count(0)) + " texels need " + format_bytes(chunk_buffers) +
                             " of buffers, more than --max-memory " + format_bytes(limit));
   if (file.desc().abrdf_size() != desc.abrdf_size() || file.desc().num_texels() != desc.num_texels())

@@ -118,8 +118,6 @@ int run(int argc, char** argv, MpiCollective& coll) {
   Params params = resolved->second;
   if (std::string(resolved->first->name()) != "fmf")
     return finish(invalid_argument("btfc-mpi compresses with fmf only (got " + std::string(resolved->first->name()) + ")"));
-  auto l = streaming_sketch_width(params);
-  if (!l.ok()) return finish(l.status());
 
   // Rank 0 prepares the working file; the others wait for the agreed outcome.
   BtfDesc desc;
@@ -128,7 +126,8 @@ int run(int argc, char** argv, MpiCollective& coll) {
   if (root) {
     s = [&]() -> Status {
       BTFC_ASSIGN_OR_RETURN(desc, probe_btf(a.in));
-      const uint32_t lines = stream_lines_per_chunk(desc, uint64_t(*l), *limit);
+      BTFC_ASSIGN_OR_RETURN(StreamPlan plan, plan_streamed_fmf(params, desc, *limit));
+      const uint32_t lines = stream_lines_per_chunk(desc, plan, *limit);
       if (lines == 0) return invalid_argument("--max-memory " + format_bytes(*limit) + " is too small for " + desc.summary());
       std::string work = a.work_file;
       if (work.empty()) {

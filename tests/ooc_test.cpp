@@ -21,116 +21,10 @@
 #include "core/synth.h"
 #include "formats/bonn/bdi_work.h"
 #include "formats/bonn/bonn_btf.h"
+#include "tests/ooc_test_util.h"
 
 using namespace btfc;
-
-namespace {
-
-std::string tmp_path(const std::string& name) { return ::testing::TempDir() + "/ooc_" + std::to_string(::getpid()) + "_" + name; }
-
-// A synthetic BTF: 81 lights, 2 views, RGB -> 486 rows.
-Btf synth(int w, int h, float scale = 1.0f) {
-  SynthOptions o;
-  o.width = w, o.height = h, o.scale = scale;
-  o.views = DirectionSet::single(dir_from_theta_phi(0.5, 1.0));
-  o.views.dirs.push_back(dir_from_theta_phi(0.9, 2.0));
-  return synthesize_btf(o).value();
-}
-
-Status write_bdi(const Btf& b, const std::string& path, uint32_t lines, float scale = 1.0f) {
-  BTFC_ASSIGN_OR_RETURN(auto w, BdiWriter::create(path, b.desc(), lines, scale, "<btfc_work scale=\"" + std::to_string(scale) + "\"/>"));
-  BTFC_RETURN_IF_ERROR(w->write_texels(0, b.desc().num_texels(), b.data()));
-  return w->finish();
-}
-
-// The whole matrix as chunks of `per` texels, straight from memory (no half rounding).
-class MemorySource final : public fmf::ChunkSource {
- public:
-  MemorySource(const Btf& b, size_t per) : m_b(b), m_per(per) {}
-  size_t rows() const override { return m_b.desc().abrdf_size(); }
-  size_t num_chunks() const override { return (m_b.desc().num_texels() + m_per - 1) / m_per; }
-  size_t chunk_first(size_t c) const override { return c * m_per; }
-  size_t chunk_count(size_t c) const override { return std::min(m_per, m_b.desc().num_texels() - c * m_per); }
-  size_t raw_bytes(size_t c) const override { return chunk_count(c) * rows() * 4; }
-  Status read(size_t c, void* raw) const override {
-    if (fail_chunk == c) return io_error("cannot read chunk " + std::to_string(c) + " (injected)");
-    std::memcpy(raw, m_b.abrdf(chunk_first(c)), raw_bytes(c));
-    return {};
-  }
-  Status decode(size_t c, const void* raw, float* dst) const override {
-    std::memcpy(dst, raw, raw_bytes(c));
-    return {};
-  }
-  size_t fail_chunk = size_t(-1);
-
- private:
-  const Btf& m_b;
-  size_t m_per;
-};
-
-// P "processes" as threads: sums through shared buffers and a barrier, like MPI_Allreduce.
-class ThreadGroup {
- public:
-  explicit ThreadGroup(int p) : m_p(p), m_bar(p) {}
-  class Member final : public fmf::Collective {
-   public:
-    Member(ThreadGroup& g, int r) : m_g(g), m_r(r) {}
-    int rank() const override { return m_r; }
-    int size() const override { return m_g.m_p; }
-    Status allreduce_sum(double* d, size_t n) override {
-      m_g.m_bar.arrive_and_wait();
-      if (m_r == 0) m_g.m_sum.assign(n, 0.0);
-      m_g.m_bar.arrive_and_wait();
-      {
-        std::lock_guard<std::mutex> lock(m_g.m_mu);
-        for (size_t i = 0; i < n; ++i) m_g.m_sum[i] += d[i];
-      }
-      m_g.m_bar.arrive_and_wait();
-      std::copy(m_g.m_sum.begin(), m_g.m_sum.end(), d);
-      m_g.m_bar.arrive_and_wait();
-      return {};
-    }
-    Status reduce_sum_to_root(float* d, size_t n) override {
-      std::vector<double> x(d, d + n);
-      BTFC_RETURN_IF_ERROR(allreduce_sum(x.data(), n));
-      if (m_r == 0) std::copy(x.begin(), x.end(), d);
-      return {};
-    }
-    Status agree(const Status& local) override {
-      m_g.m_bar.arrive_and_wait();
-      if (!local.ok()) {
-        std::lock_guard<std::mutex> lock(m_g.m_mu);
-        if (m_r < m_g.m_first) m_g.m_first = m_r, m_g.m_err = local;
-      }
-      m_g.m_bar.arrive_and_wait();
-      Status s = m_g.m_first == INT32_MAX ? Status{} : Status(m_g.m_err.code(), "rank " + std::to_string(m_g.m_first) + ": " + m_g.m_err.message());
-      m_g.m_bar.arrive_and_wait();
-      return s;
-    }
-
-   private:
-    ThreadGroup& m_g;
-    int m_r;
-  };
-
- private:
-  int m_p;
-  std::barrier<> m_bar;
-  std::mutex m_mu;
-  std::vector<double> m_sum;
-  int m_first = INT32_MAX;
-  Status m_err;
-};
-
-// ||B - U SxV^T||_F / ||B||_F.
-double actual_error(const Btf& b, const fmf::SvdResult& r) {
-  const size_t m = b.desc().abrdf_size(), n = b.desc().num_texels();
-  Eigen::Map<const Eigen::MatrixXf> B(b.data(), Eigen::Index(m), Eigen::Index(n));
-  Eigen::MatrixXd R = B.cast<double>() - r.U.cast<double>() * r.SxV.cast<double>().transpose();
-  return R.norm() / B.cast<double>().norm();
-}
-
-}  // namespace
+using namespace btfc::ooc_test;
 
 TEST(BdiWork, RoundTripThroughWriterChunksAndTheBonnReader) {
   const Btf b = synth(9, 7);
@@ -302,19 +196,9 @@ TEST(StreamingFmf, WorkingFileEncodeMatchesInCoreFmf) {
   ASSERT_TRUE(st.ok()) << st.status().message();
   ASSERT_TRUE(st->model);
   EXPECT_EQ(st->model->spec(), in_core.value()->spec());
-  auto err = [&](const Model& m) {
-    Btf out;
-    EXPECT_TRUE(m.decode_all(out).ok());
-    double se = 0, sr = 0;
-    for (size_t i = 0; i < b.size(); ++i) se += std::pow(double(out.data()[i]) - b.data()[i], 2), sr += std::pow(double(b.data()[i]), 2);
-    return std::sqrt(se / sr);
-  };
-  const double e_in = err(*in_core.value()), e_st = err(*st->model);
+  const double e_in = model_error(b, *in_core.value()), e_st = model_error(b, *st->model);
   EXPECT_GT(e_in, 0.002);
   EXPECT_LT(std::fabs(e_st - e_in) / e_in, 0.01) << "in-core " << e_in << ", streamed " << e_st;
-  // dfmf and svd=exact are refused, not silently changed.
-  auto dfmf = resolve_spec("fmf:color=dfmf");
-  EXPECT_EQ(encode_fmf_streamed(file.value(), b.desc(), dfmf->second, ctx, one).status().code(), StatusCode::unsupported);
   std::remove(path.c_str());
 }
 

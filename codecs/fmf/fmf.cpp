@@ -404,16 +404,8 @@ class FmfCodec final : public Codec {
       for (int k = 0; k < 3; ++k) {
 #pragma omp parallel for reduction(+ : clamped) schedule(static)
         for (size_t t = 0; t < n; ++t) {
-          const float* a = btf.abrdf(t);
-          for (size_t r = 0; r < rows; ++r) {
-            const float* rgb = a + 3 * r;
-            float y = k_yuv.m[0][0] * rgb[0] + k_yuv.m[0][1] * rgb[1] + k_yuv.m[0][2] * rgb[2];
-            if (y < 0) y = 0, clamped += (k == 0);
-            float v = y;
-            if (k > 0) v = (k_yuv.m[k][0] * rgb[0] + k_yuv.m[k][1] * rgb[1] + k_yuv.m[k][2] * rgb[2]) / (y + k_drr_eps);
-            else v = std::log(y + k_drr_eps);
-            ch[t * rows + r] = v;
-          }
+          const size_t c = dfmf_channel(btf.abrdf(t), rows, k, &ch[t * rows]);
+          if (k == 0) clamped += c;  // the same values clamp in every channel: count them once
         }
         static const char* names[3] = {"y", "u", "v"};
         BTFC_RETURN_IF_ERROR(factor(names[k], ch.data(), rows, k == 0 ? rank : (chroma ? chroma : rank)));
@@ -579,16 +571,59 @@ Result<std::unique_ptr<Model>> make_fmf_model(const BtfDesc& desc, int cm, std::
   return std::unique_ptr<Model>(std::move(model));
 }
 
-Result<std::unique_ptr<Model>> make_fmf_model_from_svd(const BtfDesc& desc, const Params& p, fmf::SvdResult r, ModelStats stats) {
+size_t dfmf_channel(const float* abrdf, size_t rows, int k, float* out) {
+  size_t clamped = 0;
+  for (size_t r = 0; r < rows; ++r) {
+    const float* rgb = abrdf + 3 * r;
+    float y = k_yuv.m[0][0] * rgb[0] + k_yuv.m[0][1] * rgb[1] + k_yuv.m[0][2] * rgb[2];
+    if (y < 0) y = 0, ++clamped;
+    if (k > 0) out[r] = (k_yuv.m[k][0] * rgb[0] + k_yuv.m[k][1] * rgb[1] + k_yuv.m[k][2] * rgb[2]) / (y + k_drr_eps);
+    else out[r] = std::log(y + k_drr_eps);
+  }
+  return clamped;
+}
+
+namespace {
+
+// The model of finished factorizations, one per block of the spec's colour mode, as encode()
+// makes it (quantisation, per-block rank / error statistics).
+Result<std::unique_ptr<Model>> model_from_svds(const BtfDesc& desc, const Params& p, std::vector<fmf::SvdResult> rs, ModelStats stats) {
   const Config cfg = config_from(p);
-  if (cfg.dfmf) return unsupported("fmf: make_fmf_model_from_svd builds color=rgb models only");
-  if (size_t(r.U.rows()) != desc.abrdf_size() || size_t(r.SxV.rows()) != desc.num_texels() || r.U.cols() != r.SxV.cols())
-    return invalid_argument("fmf: factor shapes disagree with the BTF (" + desc.summary() + ")");
+  const size_t rows = cfg.dfmf ? desc.num_images() : desc.abrdf_size();
+  if (rs.size() != (cfg.dfmf ? 3u : 1u)) return invalid_argument("fmf: " + std::to_string(rs.size()) + " factorizations for " + p.canonical());
+  if (cfg.dfmf && desc.channels != 3) return invalid_argument("fmf: color=dfmf needs 3 channels, the BTF has " + std::to_string(desc.channels));
+  const int rank = int(p.get_int("rank")), chroma = int(p.get_int("chroma_rank"));
+  static const char* names[3] = {"y", "u", "v"};
   std::vector<Block> blocks;
-  blocks.push_back(block_from_svd("rgb", std::move(r), cfg.half, int(p.get_int("rank")), p.get_real("target_error"), stats));
+  for (size_t k = 0; k < rs.size(); ++k) {
+    fmf::SvdResult& r = rs[k];
+    if (size_t(r.U.rows()) != rows || size_t(r.SxV.rows()) != desc.num_texels() || r.U.cols() != r.SxV.cols())
+      return invalid_argument("fmf: factor shapes disagree with the BTF (" + desc.summary() + ")");
+    const int max_rank = k == 0 ? rank : (chroma ? chroma : rank);
+    blocks.push_back(block_from_svd(cfg.dfmf ? names[k] : "rgb", std::move(r), cfg.half, max_rank, p.get_real("target_error"), stats));
+  }
   auto model = std::make_unique<FmfModel>(desc, p.canonical(), cfg, std::move(blocks));
   model->mutable_stats() = std::move(stats);
   return std::unique_ptr<Model>(std::move(model));
+}
+
+}  // namespace
+
+Result<std::unique_ptr<Model>> make_fmf_model_from_svd(const BtfDesc& desc, const Params& p, fmf::SvdResult r, ModelStats stats) {
+  if (config_from(p).dfmf) return unsupported("fmf: make_fmf_model_from_svd builds color=rgb models only (color=dfmf: make_dfmf_model_from_svd)");
+  std::vector<fmf::SvdResult> rs;
+  rs.push_back(std::move(r));
+  return model_from_svds(desc, p, std::move(rs), std::move(stats));
+}
+
+Result<std::unique_ptr<Model>> make_dfmf_model_from_svd(const BtfDesc& desc, const Params& p, fmf::SvdResult y, fmf::SvdResult u,
+                                                        fmf::SvdResult v, ModelStats stats) {
+  if (!config_from(p).dfmf) return unsupported("fmf: make_dfmf_model_from_svd builds color=dfmf models only");
+  std::vector<fmf::SvdResult> rs;
+  rs.push_back(std::move(y));
+  rs.push_back(std::move(u));
+  rs.push_back(std::move(v));
+  return model_from_svds(desc, p, std::move(rs), std::move(stats));
 }
 
 Result<FmfFactorsView> fmf_factors(const Model& model) {

@@ -83,5 +83,17 @@ Result<FmfFactorsView> fmf_factors(const Model& model);
 // (codecs/fmf/ooc_fmf.h), whose SVD streams. `r.SxV` must hold all texels.
 namespace fmf { struct SvdResult; }
 Result<std::unique_ptr<Model>> make_fmf_model_from_svd(const BtfDesc& desc, const Params& params, fmf::SvdResult r, ModelStats stats);
+// The same for color=dfmf from the factorizations of the three channel matrices (rows =
+// num_images, see dfmf_channel): y with at most `rank`, u and v with `chroma_rank` (or rank).
+Result<std::unique_ptr<Model>> make_dfmf_model_from_svd(const BtfDesc& desc, const Params& params, fmf::SvdResult y, fmf::SvdResult u,
+                                                        fmf::SvdResult v, ModelStats stats);
+
+// color=dfmf's colour transform of one texel: from its ABRDF `abrdf` (rows = num_images RGB
+// triples, the Btf layout) writes channel k (0: Y' = log(Y + eps), 1: U' = U / (Y + eps),
+// 2: V' = V / (Y + eps); YUV of Bonn's colour model 11, eps = 1e-5) to out[0, rows). Negative
+// luminance (HDR noise) is clamped to 0; returns how many of the rows were clamped (the same for
+// every k). The one definition both the in-core encode and the streamed one (ooc_dfmf.h) use,
+// so the two factorize the same matrices.
+size_t dfmf_channel(const float* abrdf, size_t rows, int k, float* out);
 
 }  // namespace btfc

@@ -4,36 +4,72 @@
 #include <algorithm>
 
 #include "codecs/fmf/fmf.h"
+#include "codecs/fmf/ooc_dfmf.h"
+#include "core/memory.h"
 
 namespace btfc {
+namespace {
 
-uint64_t streaming_fixed_bytes(uint64_t m, uint64_t n, uint64_t l) {
-  // Y (double) + the allreduce buffer (double) + Q, Z, Yf (float) on m rows; W^T, SxV (float)
-  // and the Gaussian rows on n texels; a 16 MiB allowance for the small matrices and stacks.
-  return m * l * (8 + 8 + 4 + 4 + 4) + n * l * (4 + 4) + (uint64_t(16) << 20);
+// Adds one factorization's measurements to the encode's.
+void add_stats(fmf::StreamStats& sum, fmf::StreamStats one) {
+  sum.passes += one.passes;
+  sum.bytes_read += one.bytes_read;
+  sum.pass_seconds.insert(sum.pass_seconds.end(), one.pass_seconds.begin(), one.pass_seconds.end());
+  sum.reduce_seconds += one.reduce_seconds;
+  sum.reduce_bytes += one.reduce_bytes;
+  sum.buffer_bytes = std::max(sum.buffer_bytes, one.buffer_bytes);
 }
 
-uint32_t stream_lines_per_chunk(const BtfDesc& desc, uint64_t l, size_t max_bytes) {
-  const uint64_t m = desc.abrdf_size(), fixed = streaming_fixed_bytes(m, desc.num_texels(), l);
-  if (fixed >= max_bytes) return 0;
+}  // namespace
+
+Result<StreamPlan> plan_streamed_fmf(const Params& p, const BtfDesc& desc, size_t max_bytes) {
+  StreamPlan plan;
+  plan.dfmf = p.get("color") == "dfmf";
+  if (plan.dfmf && desc.channels != 3)
+    return invalid_argument("fmf: color=dfmf needs 3 channels, the BTF has " + std::to_string(desc.channels));
+  plan.rows = plan.dfmf ? desc.num_images() : desc.abrdf_size();
+  const uint64_t m = plan.rows, n = desc.num_texels();
+  const uint64_t rank = uint64_t(p.get_int("rank")), chroma = p.get_int("chroma_rank") ? uint64_t(p.get_int("chroma_rank")) : rank;
+  const uint64_t max_rank = plan.dfmf ? std::max(rank, chroma) : rank;
+  plan.l = std::min({m, n, max_rank + uint64_t(p.get_int("oversample"))});
+  // The in-core choice (svd.cpp, truncated_svd) with the rows side for its small side: the Gram
+  // matrix of the texel side would need every pair of chunks at once.
+  const std::string svd = p.get("svd");
+  plan.exact = svd == "exact" || (svd == "auto" && m <= 1024) || max_rank + uint64_t(p.get_int("oversample")) >= m;
+  if (!plan.exact && svd == "auto" && std::min(m, n) <= 1024)
+    plan.note = "svd=auto: randomized (in core exact through the texels x texels Gram matrix, which does not stream)";
+  // Finished blocks wait for the model while the next channel runs (dfmf: y and u during v).
+  const uint64_t finished = plan.dfmf ? n * 4 * (rank + chroma) : 0, base = finished + (uint64_t(16) << 20);
+  // Randomized: Y (double) + the allreduce buffer (double) + Q, Z, Yf (float) on the rows; W^T,
+  // SxV (float) and the Gaussian rows on the texels; 16 MiB for small matrices and stacks.
+  const uint64_t randomized = m * plan.l * (8 + 8 + 4 + 4 + 4) + n * plan.l * (4 + 4) + base;
+  const uint64_t exact = fmf::streaming_exact_bytes(m) + n * max_rank * 4 + base;  // + SxV
+  if (plan.exact && exact > max_bytes) {
+    const std::string what = std::to_string(m) + " x " + std::to_string(m) + " Gram matrix (" + format_bytes(m * m * 8) +
+                             " of double; " + format_bytes(exact) + " with the eigen-solver's workspace and the factors)";
+    if (svd == "exact")
+      return invalid_argument("fmf out of core: svd=exact needs the " + what + ", more than --max-memory " + format_bytes(max_bytes) +
+                              "; use svd=randomized or give more memory");
+    plan.exact = false;
+    plan.note = "svd=" + svd + ": randomized, the exact path's " + what + " does not fit " + format_bytes(max_bytes);
+  }
+  plan.fixed_bytes = plan.exact ? exact : randomized;
+  plan.passes = (plan.exact ? 2 : int(p.get_int("power_iters")) + 2) * (plan.dfmf ? 3 : 1);
+  return plan;
+}
+
+uint32_t stream_lines_per_chunk(const BtfDesc& desc, const StreamPlan& plan, size_t max_bytes) {
+  const uint64_t m = desc.abrdf_size();  // chunks are of the BTF matrix, whatever is factorized
+  if (plan.fixed_bytes >= max_bytes) return 0;
   const uint64_t per_line = k_stream_bytes_per_value * m * uint64_t(desc.width);
-  uint64_t lines = (max_bytes - fixed) / per_line;
+  uint64_t lines = (max_bytes - plan.fixed_bytes) / per_line;
   const uint64_t cap = std::max<uint64_t>(1, (uint64_t(64) << 20) / (m * uint64_t(desc.width)));  // 64 M floats = 256 MiB
   lines = std::min({lines, cap, uint64_t(desc.height)});
   return uint32_t(lines);
 }
 
-Result<int> streaming_sketch_width(const Params& p) {
-  if (p.get("color") != "rgb")
-    return unsupported("fmf out of core: color=" + p.get("color") + " is not streamed (only color=rgb); give more --max-memory to run it in core");
-  if (p.get("svd") == "exact")
-    return unsupported("fmf out of core: svd=exact needs the rows x rows Gram matrix in memory; use svd=auto or randomized");
-  return int(p.get_int("rank") + p.get_int("oversample"));
-}
-
 Result<StreamedEncode> encode_fmf_streamed(const BdiChunks& file, const BtfDesc& desc, const Params& p, Context& ctx,
                                            fmf::Collective& coll) {
-  BTFC_RETURN_IF_ERROR(streaming_sketch_width(p).status());
   if (desc.abrdf_size() != file.desc().abrdf_size() || desc.num_texels() != file.desc().num_texels())
     return invalid_argument(file.path() + ": working file shape (" + file.desc().summary() + ") differs from the BTF's (" + desc.summary() + ")");
   BdiChunkSource src(file);
@@ -42,11 +78,10 @@ Result<StreamedEncode> encode_fmf_streamed(const BdiChunks& file, const BtfDesc&
 
 Result<StreamedEncode> encode_fmf_streamed(const fmf::ChunkSource& src, const BtfDesc& desc, const Params& p, Context& ctx,
                                            fmf::Collective& coll) {
-  BTFC_RETURN_IF_ERROR(streaming_sketch_width(p).status());
+  BTFC_ASSIGN_OR_RETURN(StreamPlan plan, plan_streamed_fmf(p, desc, ctx.max_bytes));
   if (src.rows() != desc.abrdf_size() || src.texels() != desc.num_texels())
     return invalid_argument("fmf out of core: the chunk source's shape differs from the BTF's (" + desc.summary() + ")");
   fmf::SvdOptions opt;
-  opt.max_rank = int(p.get_int("rank"));
   opt.target_rel_error = p.get_real("target_error");
   opt.oversample = int(p.get_int("oversample"));
   opt.power_iters = int(p.get_int("power_iters"));
@@ -54,9 +89,33 @@ Result<StreamedEncode> encode_fmf_streamed(const fmf::ChunkSource& src, const Bt
   opt.progress = coll.rank() == 0 ? ctx.progress : nullptr;
   StreamedEncode out;
   out.chunks = fmf::owned_chunks(src, coll.rank(), coll.size());
-  BTFC_ASSIGN_OR_RETURN(fmf::SvdResult r, fmf::streaming_svd(src, out.chunks, opt, coll, &out.stats));
+  auto factor = [&](const fmf::ChunkSource& s, int max_rank) -> Result<fmf::SvdResult> {
+    opt.max_rank = max_rank;
+    fmf::StreamStats st;
+    auto r = plan.exact ? fmf::streaming_exact_svd(s, out.chunks, opt, coll, &st) : fmf::streaming_svd(s, out.chunks, opt, coll, &st);
+    add_stats(out.stats, std::move(st));
+    return r;
+  };
+  const int rank = int(p.get_int("rank")), chroma = int(p.get_int("chroma_rank"));
+  std::vector<fmf::SvdResult> rs;
+  double clamped = 0;
+  if (!plan.dfmf) {
+    BTFC_ASSIGN_OR_RETURN(fmf::SvdResult r, factor(src, rank));
+    rs.push_back(std::move(r));
+  } else {
+    for (int k = 0; k < 3; ++k) {
+      const DfmfChannelSource channel(src, k);
+      BTFC_ASSIGN_OR_RETURN(fmf::SvdResult r, factor(channel, k == 0 ? rank : (chroma ? chroma : rank)));
+      rs.push_back(std::move(r));
+      if (k == 0) clamped = double(channel.clamped());
+    }
+    // Each process counted its own chunks; every process gets here (SVD failures are agreed).
+    BTFC_RETURN_IF_ERROR(coll.allreduce_sum(&clamped, 1));
+  }
   if (coll.rank() != 0) return out;
   ModelStats stats;
+  if (plan.dfmf) stats.add("negative_luminance_clamped", clamped);
+  if (!plan.note.empty()) stats.note("stream.svd", plan.note);
   stats.add("stream.passes", out.stats.passes);
   stats.add("stream.processes", coll.size());
   stats.add("stream.chunks", double(src.num_chunks()));
@@ -66,7 +125,10 @@ Result<StreamedEncode> encode_fmf_streamed(const fmf::ChunkSource& src, const Bt
   for (double s : out.stats.pass_seconds) total += s;
   stats.add("stream.pass_seconds", total);
   stats.add("stream.reduce_seconds", out.stats.reduce_seconds);
-  BTFC_ASSIGN_OR_RETURN(out.model, make_fmf_model_from_svd(desc, p, std::move(r), std::move(stats)));
+  auto model = plan.dfmf ? make_dfmf_model_from_svd(desc, p, std::move(rs[0]), std::move(rs[1]), std::move(rs[2]), std::move(stats))
+                         : make_fmf_model_from_svd(desc, p, std::move(rs[0]), std::move(stats));
+  if (!model.ok()) return model.status();
+  out.model = std::move(model).value();
   return out;
 }
 

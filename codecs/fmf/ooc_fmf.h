@@ -1,11 +1,19 @@
-// The fmf codec out of core: factorizes a BTF stored as an uncompressed Bonn BDI working file
-// (formats/bonn/bdi_work.h) chunk by chunk with the streaming SVD (ooc_svd.h), on one process
-// or, through a Collective, on many (btfc-mpi). Used by `btfc compress --max-memory` when the
-// BTF does not fit, and by btfc-mpi always.
+// The fmf codec out of core: factorizes a BTF read chunk by chunk (an uncompressed Bonn BDI
+// working file, formats/bonn/bdi_work.h, or any chunk source such as a raw .btfc read in place)
+// with the streamed SVDs (ooc_svd.h), on one process or, through a Collective, on many
+// (btfc-mpi). Used by `btfc compress --max-memory` when the BTF does not fit, and by btfc-mpi
+// always.
 //
-// Limits of this path (each reported as an error, not silently changed): color=rgb only (the
-// dfmf channel transform is not streamed yet); svd=exact is refused (its m x m Gram matrix is the
-// thing that does not fit); the factors are of the half-float working file, whose rounding
+// Every fmf option streams:
+//   color=rgb   one factorization of the BTF matrix (rows = abrdf_size);
+//   color=dfmf  three, one per channel matrix (Y', U', V'; rows = num_images), each a
+//               DfmfChannelSource over the same chunks (ooc_dfmf.h): three times the passes;
+//   svd=exact   the two-pass Gram method (streaming_exact_svd) when its rows x rows Gram matrix
+//               and the solver's workspace fit the limit, else an error naming the sizes;
+//   svd=auto    exact when rows <= 1024 (in core: min(rows, texels) <= 1024; only the rows side
+//               streams) and it fits, else randomized; svd=randomized with rank + oversample >=
+//               rows is exact too, as in core.
+// The factors are of the chunk source's values: for a half-float working file its rounding
 // (relative 2^-11 per value) is far below fmf's truncation error.
 #pragma once
 #include <memory>
@@ -39,28 +47,39 @@ class BdiChunkSource final : public fmf::ChunkSource {
   const BdiChunks& m_f;
 };
 
-// Bytes the streaming SVD holds besides its chunk buffers (Y, Q, the sums, W^T, SxV) for a
-// matrix of m rows, n texels and a sketch of l columns.
-uint64_t streaming_fixed_bytes(uint64_t m, uint64_t n, uint64_t l);
-// Bytes per matrix value the chunk buffers take (one raw half buffer + two float blocks): 10.
+// Bytes per value of a chunk of the BTF matrix the chunk buffers take: one raw half buffer + two
+// float blocks (10). dfmf takes no more: a float scratch of the base chunk + two channel blocks
+// a third its size (6.7) + the base's raw buffer (a BDI file's chunks are mapped: 0; the pread
+// fallback of a raw .btfc, a float copy: 10.7, within the 12 the CLI budgets for that source).
 inline constexpr uint64_t k_stream_bytes_per_value = 10;
-// Scan lines per working-file chunk so that the chunk buffers plus the fixed part fit in
-// max_bytes; 0 when even one scan line does not fit. Capped at 256 MiB of float per chunk
-// (bigger chunks gain nothing and leave fewer chunks to overlap reading with).
-uint32_t stream_lines_per_chunk(const BtfDesc& desc, uint64_t l, size_t max_bytes);
 
-// Checks the spec is one the streamed path supports (color=rgb, svd != exact); returns the
-// sketch width l = rank + oversample.
-Result<int> streaming_sketch_width(const Params& params);
+// How the streamed encode of a spec runs on a BTF (what fmf's options resolve to out of core).
+struct StreamPlan {
+  bool dfmf = false;
+  bool exact = false;        // every block by streaming_exact_svd (2 passes), else streaming_svd
+  uint64_t rows = 0;         // rows of each factorized matrix: abrdf_size, or num_images (dfmf)
+  uint64_t l = 0;            // randomized sketch width: max rank + oversample, <= min(rows, texels)
+  int passes = 0;            // passes over the chunks in all (x 3 for dfmf)
+  uint64_t fixed_bytes = 0;  // memory besides the chunk buffers (Gram or sketch, SxV, finished blocks)
+  std::string note;          // set when svd=auto or randomized resolved differently than in core
+};
+// Checks the spec streams within max_bytes (svd=exact whose Gram matrix does not fit is an
+// error naming the sizes) and resolves it.
+Result<StreamPlan> plan_streamed_fmf(const Params& params, const BtfDesc& desc, size_t max_bytes);
+// Scan lines per chunk so that the chunk buffers plus plan.fixed_bytes fit in max_bytes; 0 when
+// even one scan line does not fit. Capped at 256 MiB of float per chunk (bigger chunks gain
+// nothing and leave fewer chunks to overlap reading with).
+uint32_t stream_lines_per_chunk(const BtfDesc& desc, const StreamPlan& plan, size_t max_bytes);
 
 struct StreamedEncode {
   std::unique_ptr<Model> model;  // process 0 only (null elsewhere)
-  fmf::StreamStats stats;
+  fmf::StreamStats stats;        // summed over the factorizations (dfmf: 3); buffer_bytes: the largest
   std::vector<size_t> chunks;    // the chunks this process read
 };
 
 // Factorizes `file`; `desc` is the BTF's description (the file's own, or the original input's,
-// whose direction vectors are exact). `chunks` null = this process's share by coll.rank().
+// whose direction vectors are exact). Each process reads its share of the chunks by
+// coll.rank(); the plan is made against ctx.max_bytes (per process).
 Result<StreamedEncode> encode_fmf_streamed(const BdiChunks& file, const BtfDesc& desc, const Params& params, Context& ctx,
                                            fmf::Collective& coll);
 // The same from any chunk source of `desc`'s shape (e.g. a raw .btfc read in place,

@@ -2,12 +2,11 @@
 #include "codecs/fmf/ooc_svd.h"
 
 #include <Eigen/Dense>
-#include <chrono>
-#include <cmath>
 #include <algorithm>
-#include <functional>
-#include <future>
+#include <cmath>
 #include <random>
+
+#include "codecs/fmf/ooc_pass.h"
 
 namespace btfc::fmf {
 namespace {
@@ -15,9 +14,6 @@ namespace {
 using Eigen::Index;
 using Eigen::MatrixXd;
 using Eigen::MatrixXf;
-using Clock = std::chrono::steady_clock;
-
-double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 // Orthonormal basis of Y's columns (thin Householder QR in double, as the in-core path).
 MatrixXf orthonormalize(const MatrixXd& Y) {
@@ -42,46 +38,6 @@ void gaussian_rows(uint64_t seed, size_t first, size_t count, Index l, MatrixXf&
   }
 }
 
-struct Buffers {
-  std::vector<uint8_t> raw;
-  std::vector<float> block[2];
-};
-
-// Reads and decodes (or maps) the owned chunks in order on a helper thread, one chunk ahead of
-// `fn`, which multiplies the previous one. The helper does all the I/O and the conversion, so the
-// main thread only runs GEMMs (no OpenMP region between them whose spinning threads would
-// compete with the BLAS threads). Stops at the first failure (after the helper finished).
-Status for_each_chunk(const ChunkSource& src, const std::vector<size_t>& chunks, Buffers& b, StreamStats& st,
-                      const std::function<void(size_t c, const float* B, size_t count)>& fn) {
-  if (chunks.empty()) return {};
-  const bool mapped = src.mappable();
-  auto load = [&](size_t i) {
-    return std::async(std::launch::async, [&src, &b, &chunks, i, mapped]() -> Result<const float*> {
-      if (mapped) return src.map(chunks[i]);
-      float* dst = b.block[i % 2].data();
-      Status s = src.load(chunks[i], b.raw.empty() ? nullptr : b.raw.data(), dst);
-      if (!s.ok()) return s;
-      return static_cast<const float*>(dst);
-    });
-  };
-  std::future<Result<const float*>> next = load(0);
-  for (size_t i = 0; i < chunks.size(); ++i) {
-    Result<const float*> cur = next.get();
-    if (i + 1 < chunks.size() && cur.ok()) next = load(i + 1);
-    if (!cur.ok()) {
-      if (next.valid()) {
-        Result<const float*> other = next.get();
-        if (mapped && other.ok()) src.unmap(chunks[i + 1], *other);
-      }
-      return cur.status();
-    }
-    st.bytes_read += src.raw_bytes(chunks[i]);
-    fn(chunks[i], *cur, src.chunk_count(chunks[i]));
-    if (mapped) src.unmap(chunks[i], *cur);
-  }
-  return {};
-}
-
 }  // namespace
 
 std::vector<size_t> owned_chunks(const ChunkSource& src, int rank, int size) {
@@ -97,50 +53,9 @@ Result<SvdResult> streaming_svd(const ChunkSource& src, const std::vector<size_t
   if (m == 0 || n == 0) return invalid_argument("SVD of an empty matrix");
   if (opt.max_rank < 1) return invalid_argument("SVD rank must be >= 1");
   const Index l = Index(std::min<size_t>(std::min(m, n), size_t(opt.max_rank) + size_t(opt.oversample)));
-  StreamStats st;
-  Buffers b;
-  size_t max_raw = 0, max_count = 0;
-  for (size_t c : chunks) max_raw = std::max(max_raw, src.raw_buffer_bytes(c)), max_count = std::max(max_count, src.chunk_count(c));
-  Status local;
-  if (src.mappable()) {
-    st.buffer_bytes = 2 * 4 * max_count * m;  // two mapped float chunks
-  } else {
-    try {
-      b.raw.resize(max_raw);
-      b.block[0].resize(max_count * m);
-      b.block[1].resize(max_count * m);
-    } catch (const std::bad_alloc&) {
-      local = io_error("out of memory allocating the chunk buffers (" + std::to_string(max_raw + 8 * max_count * m) + " bytes)");
-    }
-    st.buffer_bytes = max_raw + 8 * max_count * m;
-  }
   const int total_passes = opt.power_iters + 2;
-  if (opt.progress) opt.progress->start("fmf out-of-core SVD", uint64_t(total_passes) * chunks.size());
-
-  // One pass = the chunks, then one collective sum of `buf` whose last element is the error flag.
-  std::vector<double> buf;
-  // `pack` copies the local sums into buf[0, payload) before the collective sum.
-  auto pass = [&](size_t payload, const std::function<void(size_t, const float*, size_t)>& fn,
-                  const std::function<void(double*)>& pack) -> Status {
-    const auto t0 = Clock::now();
-    buf.assign(payload + 1, 0.0);
-    if (local.ok())
-      local = for_each_chunk(src, chunks, b, st, [&](size_t c, const float* B, size_t k) {
-        fn(c, B, k);
-        if (opt.progress) opt.progress->advance();
-      });
-    if (local.ok()) pack(buf.data());
-    buf[payload] = local.ok() ? 0.0 : 1.0;
-    const auto r0 = Clock::now();
-    Status s = coll.allreduce_sum(buf.data(), buf.size());
-    st.reduce_seconds += since(r0);
-    st.reduce_bytes += buf.size() * sizeof(double);
-    ++st.passes;
-    st.pass_seconds.push_back(since(t0));
-    if (!s.ok()) return s;
-    if (buf[payload] > 0) return coll.agree(local);  // every process takes this branch together
-    return {};
-  };
+  PassRunner run(src, chunks, coll, opt.progress, "fmf out-of-core SVD", total_passes);
+  std::vector<double>& buf = run.sums();
 
   // Pass 0: sketch and energy.
   MatrixXd Y = MatrixXd::Zero(Index(m), l);
@@ -149,13 +64,13 @@ Result<SvdResult> streaming_svd(const ChunkSource& src, const std::vector<size_t
     MatrixXf Om, Yf;
     auto sketch = [&](size_t c, const float* Bp, size_t k) {
       Eigen::Map<const MatrixXf> B(Bp, Index(m), Index(k));
-      // Column sums in float (short), accumulated in double; serial: see for_each_chunk.
+      // Column sums in float (short), accumulated in double; serial: see ooc_pass.cpp.
       for (Index j = 0; j < Index(k); ++j) energy += double(B.col(j).squaredNorm());
       gaussian_rows(opt.seed, src.chunk_first(c), k, l, Om);
       Yf.noalias() = B * Om;
       Y += Yf.cast<double>();
     };
-    BTFC_RETURN_IF_ERROR(pass(m * size_t(l) + 1, sketch, [&](double* d) {
+    BTFC_RETURN_IF_ERROR(run.pass(m * size_t(l) + 1, sketch, [&](double* d) {
       std::copy(Y.data(), Y.data() + Y.size(), d);
       d[Y.size()] = energy;
     }));
@@ -173,7 +88,7 @@ Result<SvdResult> streaming_svd(const ChunkSource& src, const std::vector<size_t
       Yf.noalias() = B * Z;
       Y += Yf.cast<double>();
     };
-    BTFC_RETURN_IF_ERROR(pass(m * size_t(l), power, [&](double* d) { std::copy(Y.data(), Y.data() + Y.size(), d); }));
+    BTFC_RETURN_IF_ERROR(run.pass(m * size_t(l), power, [&](double* d) { std::copy(Y.data(), Y.data() + Y.size(), d); }));
     Y = Eigen::Map<MatrixXd>(buf.data(), Index(m), l);
     Q = orthonormalize(Y);
   }
@@ -187,9 +102,9 @@ Result<SvdResult> streaming_svd(const ChunkSource& src, const std::vector<size_t
     G += (W.transpose() * W).cast<double>();
     wt.emplace_back(c, std::move(W));
   };
-  BTFC_RETURN_IF_ERROR(pass(size_t(l * l), project, [&](double* d) { std::copy(G.data(), G.data() + G.size(), d); }));
+  BTFC_RETURN_IF_ERROR(run.pass(size_t(l * l), project, [&](double* d) { std::copy(G.data(), G.data() + G.size(), d); }));
   G = Eigen::Map<MatrixXd>(buf.data(), l, l);
-  b = Buffers{};
+  run.release();
 
   Eigen::VectorXd lambda;
   MatrixXd E;
@@ -208,14 +123,10 @@ Result<SvdResult> streaming_svd(const ChunkSource& src, const std::vector<size_t
   const MatrixXf Ekf = Ek.cast<float>();
   for (auto& [c, W] : wt) sxv.middleRows(Index(src.chunk_first(c)), W.rows()) = W * Ekf;
   wt.clear();
-  const auto r0 = Clock::now();
-  Status s = coll.reduce_sum_to_root(sxv.data(), size_t(sxv.size()));
-  st.reduce_seconds += since(r0);
-  st.reduce_bytes += uint64_t(sxv.size()) * 4;
-  BTFC_RETURN_IF_ERROR(s);
+  BTFC_RETURN_IF_ERROR(run.reduce_to_root(sxv.data(), size_t(sxv.size())));
   if (coll.rank() == 0) r.SxV = std::move(sxv);
-  if (opt.progress) opt.progress->finish();
-  if (stats_out) *stats_out = std::move(st);
+  run.finish_progress();
+  if (stats_out) *stats_out = run.take_stats();
   return r;
 }
 

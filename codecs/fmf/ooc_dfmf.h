@@ -1,0 +1,53 @@
+// color=dfmf out of core: the channel matrices of Bonn's DFMF colour model (log luminance Y',
+// chroma ratios U', V'; rows = num_images, fmf.h) as chunk sources over a source of the BTF
+// matrix (rows = num_images x 3, RGB fastest), so the streamed SVDs (ooc_svd.h) factorize each
+// channel without the channel matrix ever existing whole. Each chunk is the base chunk run
+// through dfmf_channel (fmf.h), the transform the in-core encode uses, texel by texel.
+//
+// Memory per chunk: the base chunk (mapped when the base is mappable, else loaded through the
+// base's load() into a float scratch that, with the base's raw buffer, lives in the raw buffer
+// streaming_svd allocates for this source) plus the two channel blocks streaming_svd holds:
+// base chunk values x (4 + 8/3 [+ the base's raw bytes]) bytes, within the 10 bytes per value
+// ooc_fmf.h budgets for a chunk of the base.
+//
+// Loads run on one helper thread at a time (ooc_pass.h); several channel sources over the same
+// base may exist, they share nothing but the base.
+#pragma once
+#include <atomic>
+#include <memory>
+#include <vector>
+
+#include "codecs/fmf/ooc_svd.h"
+
+namespace btfc {
+
+class DfmfChannelSource final : public fmf::ChunkSource {
+ public:
+  // Channel k (0: Y', 1: U', 2: V') of `base`, whose rows must be a multiple of 3.
+  DfmfChannelSource(const fmf::ChunkSource& base, int k);
+  size_t rows() const override { return m_base.rows() / 3; }
+  size_t num_chunks() const override { return m_base.num_chunks(); }
+  size_t chunk_first(size_t c) const override { return m_base.chunk_first(c); }
+  size_t chunk_count(size_t c) const override { return m_base.chunk_count(c); }
+  size_t raw_bytes(size_t c) const override { return m_base.raw_bytes(c); }
+  // read(): the base's raw bytes; decode(): the base's decode into a temporary float chunk, then
+  // the transform. load() (what the SVDs call) avoids the temporary: see the header comment.
+  Status read(size_t c, void* raw) const override { return m_base.read(c, raw); }
+  Status decode(size_t c, const void* raw, float* dst) const override;
+  Status load(size_t c, void* raw, float* dst) const override;
+  size_t raw_buffer_bytes(size_t c) const override;
+
+  // Luminance values clamped to 0 over the chunks loaded so far, each chunk counted once however
+  // often it was loaded (channel 0 only counts; the other channels clamp the same values).
+  uint64_t clamped() const;
+
+ private:
+  Status transform(size_t c, const float* base_chunk, float* dst) const;
+  static size_t scratch_bytes(size_t values);
+
+  const fmf::ChunkSource& m_base;
+  int m_k;
+  std::unique_ptr<std::atomic<uint64_t>[]> m_clamped;  // per chunk; set (not added) by every load
+};
+
+}  // namespace btfc

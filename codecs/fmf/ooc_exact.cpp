@@ -1,0 +1,100 @@
+// Streaming exact SVD through the rows x rows Gram matrix; see ooc_svd.h for the contract.
+//
+// The in-core exact path (svd.cpp, exact_svd) eigendecomposes G = B B^T in double and projects
+// SxV = B^T U. Both steps only ever need one column block of B at a time, so out of core they
+// become two passes: pass 1 sums G and ||B||_F^2 over the chunks (one collective sum of G's lower
+// triangle), pass 2 computes the chunk's rows of SxV = B_c^T U. The eigen-solver and the rank
+// choice are the in-core ones (top_eigenpairs, choose_rank), so the result equals exact_svd's up
+// to float rounding of the SxV GEMM.
+#include <Eigen/Dense>
+#include <algorithm>
+
+#include "codecs/fmf/ooc_pass.h"
+#include "codecs/fmf/ooc_svd.h"
+
+namespace btfc::fmf {
+namespace {
+
+using Eigen::Index;
+using Eigen::MatrixXd;
+using Eigen::MatrixXf;
+
+// Columns of B converted to double at a time for the Gram update: at most 4096 (as in core)
+// and at most 32 MiB of double, so a chunk never needs a double copy of itself.
+Index gram_block_columns(uint64_t m) { return Index(std::clamp<uint64_t>((uint64_t(32) << 20) / 8 / std::max<uint64_t>(m, 1), 1, 4096)); }
+
+}  // namespace
+
+uint64_t streaming_exact_bytes(uint64_t m) {
+  // G, the solver's eigenvector matrix and the sorted copy top_eigenpairs returns are alive
+  // together (3 m^2 doubles; the sum buffer, half a Gram, is freed before the solver runs),
+  // plus one double column block.
+  return 3 * m * m * 8 + m * uint64_t(gram_block_columns(m)) * 8;
+}
+
+Result<SvdResult> streaming_exact_svd(const ChunkSource& src, const std::vector<size_t>& chunks, const SvdOptions& opt, Collective& coll,
+                                      StreamStats* stats_out) {
+  const size_t m = src.rows(), n = src.texels();
+  if (m == 0 || n == 0) return invalid_argument("SVD of an empty matrix");
+  if (opt.max_rank < 1) return invalid_argument("SVD rank must be >= 1");
+  PassRunner run(src, chunks, coll, opt.progress, "fmf out-of-core exact SVD", 2);
+  std::vector<double>& buf = run.sums();
+  const Index M = Index(m), block = gram_block_columns(m);
+  const size_t tri = m * (m + 1) / 2;  // the lower triangle is what the processes sum
+
+  // Pass 1: G = sum_c B_c B_c^T (lower triangle) and ||B||_F^2, in double.
+  MatrixXd G = MatrixXd::Zero(M, M);
+  double energy = 0;
+  {
+    MatrixXd Bd;
+    auto gram = [&](size_t, const float* Bp, size_t k) {
+      Eigen::Map<const MatrixXf> B(Bp, M, Index(k));
+      for (Index j0 = 0; j0 < Index(k); j0 += block) {
+        Bd = B.middleCols(j0, std::min(block, Index(k) - j0)).cast<double>();
+        energy += Bd.squaredNorm();
+        G.selfadjointView<Eigen::Lower>().rankUpdate(Bd);
+      }
+    };
+    BTFC_RETURN_IF_ERROR(run.pass(tri + 1, gram, [&](double* d) {
+      for (Index j = 0; j < M; ++j) d = std::copy(G.col(j).data() + j, G.col(j).data() + M, d);
+      *d = energy;
+    }));
+    const double* d = buf.data();
+    for (Index j = 0; j < M; ++j)
+      for (Index i = j; i < M; ++i, ++d) G(i, j) = G(j, i) = *d;
+    energy = buf[tri];
+    std::vector<double>().swap(buf);  // before the solver: keeps the peak at 3 m^2 doubles
+  }
+
+  Eigen::VectorXd lambda;
+  MatrixXd E;
+  top_eigenpairs(G, M, lambda, E);
+  G.resize(0, 0);
+  SvdResult r;
+  r.method = "exact (streamed)";
+  r.requested_rank = opt.max_rank;
+  r.total_energy = energy;
+  const int rank = choose_rank(lambda, energy, opt, r.data_rank_limit, r.target_reached);
+  r.S = lambda.head(rank).cwiseSqrt();
+  r.kept_energy = lambda.head(rank).sum();
+  r.U = E.leftCols(rank).cast<float>();
+  E.resize(0, 0);
+
+  // Pass 2: the owned rows of SxV = B^T U (the projection, as in core), summed (disjoint rows:
+  // exact) into process 0. The pass's collective sum carries only the error flag.
+  MatrixXfR sxv = MatrixXfR::Zero(Index(n), rank);
+  const MatrixXf Uf = r.U;
+  auto project = [&](size_t c, const float* Bp, size_t k) {
+    Eigen::Map<const MatrixXf> B(Bp, M, Index(k));
+    sxv.middleRows(Index(src.chunk_first(c)), Index(k)).noalias() = B.transpose() * Uf;
+  };
+  BTFC_RETURN_IF_ERROR(run.pass(0, project, [](double*) {}));
+  run.release();
+  BTFC_RETURN_IF_ERROR(run.reduce_to_root(sxv.data(), size_t(sxv.size())));
+  if (coll.rank() == 0) r.SxV = std::move(sxv);
+  run.finish_progress();
+  if (stats_out) *stats_out = run.take_stats();
+  return r;
+}
+
+}  // namespace btfc::fmf

@@ -1,0 +1,62 @@
+// The pass machinery the streamed SVDs (ooc_svd.cpp: randomized, ooc_exact.cpp: Gram) share:
+// reading the owned chunks one ahead on a helper thread, and ending every pass with ONE
+// collective sum that also carries the error flag. Internal to codecs/fmf.
+//
+// Failure contract (the reason this is one piece of code): a process whose chunk read or decode
+// fails stops reading but still joins every collective sum of the pass (with flag 1), so no
+// process waits forever; after the sum every process sees the flag and returns
+// Collective::agree(local), i.e. all of them the lowest failing process's message. Once failed,
+// a runner skips the chunks of later passes (it returns at the first failed pass anyway).
+#pragma once
+#include <chrono>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "codecs/fmf/ooc_svd.h"
+
+namespace btfc::fmf {
+
+class PassRunner {
+ public:
+  // Allocates the chunk buffers (none for a mappable source); an allocation failure becomes the
+  // local error, reported at the end of the first pass like a read failure. `progress` (may be
+  // null) counts passes x owned chunks under `label`.
+  PassRunner(const ChunkSource& src, const std::vector<size_t>& chunks, Collective& coll, Progress* progress, const std::string& label,
+             int passes);
+
+  // fn(chunk, B, count) for every owned chunk in order (B: rows x count column-major floats, valid
+  // during the call), then pack(sums) copies the local result into sums[0, payload), then the
+  // collective sum of payload + 1 doubles (the last one is the error flag). Afterwards sums()
+  // holds the global sums.
+  Status pass(size_t payload, const std::function<void(size_t c, const float* B, size_t count)>& fn,
+              const std::function<void(double* sums)>& pack);
+  std::vector<double>& sums() { return m_buf; }
+
+  // Collective::reduce_sum_to_root, timed and counted in the stats.
+  Status reduce_to_root(float* data, size_t n);
+  // Frees the chunk buffers and the sum buffer (call after the last pass).
+  void release();
+  void finish_progress() {
+    if (m_progress) m_progress->finish();
+  }
+  StreamStats take_stats() { return std::move(m_st); }
+
+ private:
+  struct Buffers {
+    std::vector<uint8_t> raw;
+    std::vector<float> block[2];
+  };
+  Status for_each_chunk(const std::function<void(size_t, const float*, size_t)>& fn);
+
+  const ChunkSource& m_src;
+  const std::vector<size_t>& m_chunks;
+  Collective& m_coll;
+  Progress* m_progress;
+  Buffers m_b;
+  StreamStats m_st;
+  Status m_local;
+  std::vector<double> m_buf;
+};
+
+}  // namespace btfc::fmf

@@ -1,0 +1,258 @@
+// Tests of the streamed color=dfmf and svd=exact paths: each against its in-core counterpart,
+// three simulated processes against one, failures reaching every process, and the refusal of a
+// Gram matrix that does not fit the limit.
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+#include <thread>
+
+#include "codecs/codec.h"
+#include "codecs/fmf/fmf.h"
+#include "codecs/fmf/ooc_dfmf.h"
+#include "codecs/fmf/ooc_fmf.h"
+#include "codecs/fmf/svd.h"
+#include "tests/ooc_test_util.h"
+
+using namespace btfc;
+using namespace btfc::ooc_test;
+
+namespace {
+
+double stat(const Model& m, const std::string& key) {
+  for (const auto& [k, v] : m.stats().numbers)
+    if (k == key) return v;
+  ADD_FAILURE() << "no stat " << key;
+  return -1;
+}
+
+// A BTF with some negative luminance (HDR noise), so the clamp count means something.
+Btf noisy(int w, int h) {
+  Btf b = synth(w, h);
+  for (size_t t = 0; t < b.desc().num_texels(); t += 7)
+    for (int c = 0; c < 3; ++c) b.abrdf(t)[3 * (t % b.desc().num_images()) + size_t(c)] = -0.02f;
+  return b;
+}
+
+// encode_fmf_streamed over `p` thread-simulated processes; returns process 0's result.
+Result<StreamedEncode> encode_on(int p, const fmf::ChunkSource& src, const Btf& b, const Params& params) {
+  ThreadGroup group(p);
+  std::vector<Result<StreamedEncode>> res;
+  for (int r = 0; r < p; ++r) res.emplace_back(Status{});
+  std::vector<std::thread> th;
+  for (int r = 0; r < p; ++r)
+    th.emplace_back([&, r] {
+      ThreadGroup::Member me(group, r);
+      Context ctx;
+      res[size_t(r)] = encode_fmf_streamed(src, b.desc(), params, ctx, me);
+    });
+  for (auto& t : th) t.join();
+  for (int r = 1; r < p; ++r) {
+    if (!res[size_t(r)].ok()) return res[size_t(r)].status();
+    EXPECT_FALSE(res[size_t(r)]->model) << "only process 0 builds the model";
+  }
+  return std::move(res[0]);
+}
+
+// ||A - B|| / ||A|| of two models' decoded BTFs.
+double model_difference(const Model& a, const Model& b) {
+  Btf x, y;
+  EXPECT_TRUE(a.decode_all(x).ok() && b.decode_all(y).ok());
+  Eigen::Map<const Eigen::VectorXf> X(x.data(), Eigen::Index(x.size())), Y(y.data(), Eigen::Index(y.size()));
+  return (X - Y).cast<double>().norm() / X.cast<double>().norm();
+}
+
+}  // namespace
+
+TEST(StreamingDfmf, MatchesInCoreDfmfFromCopiedAndMappedChunks) {
+  const Btf b = noisy(20, 18);  // 162 images x 360 texels
+  auto spec = resolve_spec("fmf:color=dfmf:rank=10:chroma_rank=6:oversample=8:power_iters=3:svd=randomized");
+  ASSERT_TRUE(spec.ok());
+  Context ctx;
+  auto in_core = spec->first->encode(b, spec->second, ctx);
+  ASSERT_TRUE(in_core.ok()) << in_core.status().message();
+  const double e_in = model_error(b, *in_core.value());
+  EXPECT_GT(e_in, 0.002);  // not exact at these ranks: the comparison means something
+  for (bool mapped : {false, true}) {
+    MemorySource src(b, 50);  // 8 chunks, the last one short
+    src.mapped = mapped;
+    fmf::Collective one;
+    auto st = encode_fmf_streamed(src, b.desc(), spec->second, ctx, one);
+    ASSERT_TRUE(st.ok()) << st.status().message();
+    const Model& m = *st->model;
+    EXPECT_EQ(m.spec(), in_core.value()->spec());
+    const double e_st = model_error(b, m);
+    EXPECT_LT(std::fabs(e_st - e_in) / e_in, 0.01) << "mapped " << mapped << ": in core " << e_in << ", streamed " << e_st;
+    // The same clamped values and ranks as in core; three SVDs of power_iters + 2 passes.
+    EXPECT_EQ(stat(m, "negative_luminance_clamped"), stat(*in_core.value(), "negative_luminance_clamped"));
+    EXPECT_GT(stat(m, "negative_luminance_clamped"), 0);
+    EXPECT_EQ(stat(m, "rank.y"), 10);
+    EXPECT_EQ(stat(m, "rank.u"), 6);
+    EXPECT_EQ(stat(m, "rank.v"), 6);
+    EXPECT_EQ(st->stats.passes, 3 * (3 + 2));
+    EXPECT_EQ(stat(m, "stream.passes"), 15);
+    EXPECT_EQ(st->stats.bytes_read, uint64_t(15) * b.desc().num_values() * 4);
+  }
+}
+
+TEST(StreamingDfmf, ChannelChunksAreTheInCoreTransform) {
+  const Btf b = noisy(6, 5);
+  const size_t rows = b.desc().num_images();
+  MemorySource src(b, 7);
+  for (int k = 0; k < 3; ++k) {
+    DfmfChannelSource ch(src, k);
+    ASSERT_EQ(ch.rows(), rows);
+    std::vector<uint8_t> raw(ch.raw_buffer_bytes(1));
+    std::vector<float> got(rows * ch.chunk_count(1)), want(got.size());
+    ASSERT_TRUE(ch.load(1, raw.data(), got.data()).ok());
+    size_t clamped = 0;
+    for (size_t t = 0; t < ch.chunk_count(1); ++t) clamped += dfmf_channel(b.abrdf(7 + t), rows, k, &want[t * rows]);
+    EXPECT_EQ(got, want) << "channel " << k;
+    EXPECT_EQ(ch.clamped(), k == 0 ? clamped : 0u);
+    // read() + decode() give the same values as load().
+    std::vector<uint8_t> raw2(ch.raw_bytes(1));
+    std::vector<float> again(got.size());
+    ASSERT_TRUE(ch.read(1, raw2.data()).ok());
+    ASSERT_TRUE(ch.decode(1, raw2.data(), again.data()).ok());
+    EXPECT_EQ(again, want);
+  }
+}
+
+TEST(StreamingExact, MatchesTheInCoreExactSvd) {
+  const Btf b = synth(24, 24);  // 486 x 576: the rows side is the small one, as in core
+  const size_t m = b.desc().abrdf_size(), n = b.desc().num_texels();
+  fmf::SvdOptions opt;
+  opt.max_rank = 12, opt.method = fmf::SvdMethod::exact;
+  auto in_core = fmf::truncated_svd(b.data(), m, n, opt);
+  ASSERT_TRUE(in_core.ok());
+  MemorySource src(b, 70);
+  fmf::Collective one;
+  fmf::StreamStats st;
+  auto streamed = fmf::streaming_exact_svd(src, fmf::owned_chunks(src, 0, 1), opt, one, &st);
+  ASSERT_TRUE(streamed.ok()) << streamed.status().message();
+  EXPECT_EQ(st.passes, 2);
+  EXPECT_EQ(st.bytes_read, uint64_t(2) * m * n * 4);
+  ASSERT_EQ(streamed->U.cols(), 12);
+  const double e_in = actual_error(b, in_core.value()), e_st = actual_error(b, streamed.value());
+  EXPECT_GT(e_in, 0.001);
+  EXPECT_LT(std::fabs(e_st - e_in) / e_in, 1e-5) << "in core " << e_in << ", streamed " << e_st;
+  EXPECT_LT(std::fabs(streamed->rel_error_estimate() - in_core->rel_error_estimate()) / e_in, 1e-5);
+  EXPECT_LT((streamed->S - in_core->S).norm() / in_core->S.norm(), 1e-6);
+  // The same subspace: the projectors U U^T agree (signs of components do not matter).
+  const Eigen::MatrixXd Ui = in_core->U.cast<double>(), Us = streamed->U.cast<double>();
+  EXPECT_LT((Ui * Ui.transpose() - Us * Us.transpose()).norm(), 1e-5);
+  // Mapped chunks give the same factorization.
+  src.mapped = true;
+  auto mapped = fmf::streaming_exact_svd(src, fmf::owned_chunks(src, 0, 1), opt, one);
+  ASSERT_TRUE(mapped.ok());
+  EXPECT_LT((mapped->U - streamed->U).norm(), 1e-6);
+}
+
+TEST(StreamingExact, TargetErrorPicksTheInCoreRank) {
+  const Btf b = synth(24, 24);
+  fmf::SvdOptions opt;
+  opt.max_rank = 40, opt.target_rel_error = 0.05, opt.method = fmf::SvdMethod::exact;
+  auto in_core = fmf::truncated_svd(b.data(), b.desc().abrdf_size(), b.desc().num_texels(), opt);
+  MemorySource src(b, 100);
+  fmf::Collective one;
+  auto streamed = fmf::streaming_exact_svd(src, fmf::owned_chunks(src, 0, 1), opt, one);
+  ASSERT_TRUE(in_core.ok() && streamed.ok());
+  EXPECT_GT(in_core->U.cols(), 1);
+  EXPECT_LT(in_core->U.cols(), 40);
+  EXPECT_EQ(streamed->U.cols(), in_core->U.cols());
+  EXPECT_LE(streamed->rel_error_estimate(), 0.05);
+  EXPECT_TRUE(streamed->target_reached);
+}
+
+TEST(StreamingExact, ThreeProcessesGiveTheOneProcessResultAndAgreeOnFailures) {
+  const Btf b = synth(16, 15);
+  MemorySource src(b, 32);  // 8 chunks over 3 processes
+  fmf::SvdOptions opt;
+  opt.max_rank = 8;
+  fmf::Collective one;
+  auto ref = fmf::streaming_exact_svd(src, fmf::owned_chunks(src, 0, 1), opt, one);
+  ASSERT_TRUE(ref.ok());
+  for (bool fail : {false, true}) {
+    src.fail_chunk = fail ? 7 : size_t(-1);  // chunk 7 belongs to process 2
+    ThreadGroup group(3);
+    std::vector<Result<fmf::SvdResult>> res(3, Result<fmf::SvdResult>(Status{}));
+    std::vector<std::thread> th;
+    for (int r = 0; r < 3; ++r)
+      th.emplace_back([&, r] {
+        ThreadGroup::Member me(group, r);
+        res[size_t(r)] = fmf::streaming_exact_svd(src, fmf::owned_chunks(src, r, 3), opt, me);
+      });
+    for (auto& t : th) t.join();  // a hang here would time the test out
+    if (fail) {
+      for (int r = 0; r < 3; ++r)
+        EXPECT_NE(res[size_t(r)].status().message().find("rank 2: cannot read chunk 7"), std::string::npos) << res[size_t(r)].status().message();
+      continue;
+    }
+    for (int r = 0; r < 3; ++r) ASSERT_TRUE(res[size_t(r)].ok()) << res[size_t(r)].status().message();
+    EXPECT_TRUE(res[1]->SxV.size() == 0 && res[2]->SxV.size() == 0);
+    Eigen::MatrixXd A = ref->U.cast<double>() * ref->SxV.cast<double>().transpose();
+    Eigen::MatrixXd B = res[0]->U.cast<double>() * res[0]->SxV.cast<double>().transpose();
+    EXPECT_GT(A.norm(), 0);
+    EXPECT_LT((A - B).norm() / A.norm(), 1e-5);
+  }
+}
+
+TEST(StreamingDfmf, ThreeProcessesGiveTheOneProcessModelRandomizedAndExact) {
+  const Btf b = noisy(16, 15);
+  MemorySource src(b, 24);  // 10 chunks
+  for (const char* svd : {"randomized", "exact"}) {
+    auto spec = resolve_spec(std::string("fmf:color=dfmf:rank=8:chroma_rank=4:oversample=6:power_iters=2:precision=float:svd=") + svd);
+    ASSERT_TRUE(spec.ok());
+    auto one = encode_on(1, src, b, spec->second), three = encode_on(3, src, b, spec->second);
+    ASSERT_TRUE(one.ok()) << one.status().message();
+    ASSERT_TRUE(three.ok()) << three.status().message();
+    EXPECT_LT(model_difference(*one->model, *three->model), 1e-4) << svd;
+    EXPECT_EQ(stat(*three->model, "negative_luminance_clamped"), stat(*one->model, "negative_luminance_clamped")) << svd;
+    EXPECT_GT(stat(*three->model, "negative_luminance_clamped"), 0);
+    EXPECT_EQ(stat(*three->model, "stream.passes"), std::string(svd) == "exact" ? 6 : 12) << svd;
+  }
+}
+
+TEST(StreamingExact, StreamedDfmfExactMatchesInCore) {
+  const Btf b = noisy(24, 24);  // 162 images x 576 texels
+  auto spec = resolve_spec("fmf:color=dfmf:rank=10:chroma_rank=5:svd=exact:precision=float");
+  Context ctx;
+  auto in_core = spec->first->encode(b, spec->second, ctx);
+  ASSERT_TRUE(in_core.ok());
+  MemorySource src(b, 100);
+  fmf::Collective one;
+  auto st = encode_fmf_streamed(src, b.desc(), spec->second, ctx, one);
+  ASSERT_TRUE(st.ok()) << st.status().message();
+  const double e_in = model_error(b, *in_core.value()), e_st = model_error(b, *st->model);
+  EXPECT_GT(e_in, 1e-3);
+  EXPECT_LT(std::fabs(e_st - e_in) / e_in, 1e-4) << e_in << " " << e_st;
+  EXPECT_LT(model_difference(*in_core.value(), *st->model), 1e-4);
+}
+
+TEST(StreamingExact, GramThatDoesNotFitIsRefusedNamingTheSizes) {
+  const Btf b = synth(8, 8);  // 486 rows
+  auto exact = resolve_spec("fmf:rank=8:svd=exact"), automatic = resolve_spec("fmf:rank=8");
+  ASSERT_TRUE(exact.ok() && automatic.ok());
+  // With room: both resolve to the exact path.
+  auto roomy = plan_streamed_fmf(exact->second, b.desc(), size_t(1) << 30);
+  ASSERT_TRUE(roomy.ok());
+  EXPECT_TRUE(roomy->exact);
+  EXPECT_EQ(roomy->passes, 2);
+  EXPECT_TRUE(plan_streamed_fmf(automatic->second, b.desc(), size_t(1) << 30)->exact);
+  // 486^2 doubles = 1.8 MiB, x 3 with the solver: does not fit 4 MiB.
+  auto tight = plan_streamed_fmf(exact->second, b.desc(), size_t(4) << 20);
+  ASSERT_FALSE(tight.ok());
+  EXPECT_EQ(tight.status().code(), StatusCode::invalid_argument);
+  EXPECT_NE(tight.status().message().find("486 x 486 Gram matrix"), std::string::npos) << tight.status().message();
+  EXPECT_NE(tight.status().message().find("--max-memory 4.0 MiB"), std::string::npos) << tight.status().message();
+  // svd=auto falls back to the randomized path and says so.
+  auto fallback = plan_streamed_fmf(automatic->second, b.desc(), size_t(4) << 20);
+  ASSERT_TRUE(fallback.ok());
+  EXPECT_FALSE(fallback->exact);
+  EXPECT_NE(fallback->note.find("does not fit"), std::string::npos) << fallback->note;
+  // The encode refuses the same way (its limit is the context's).
+  MemorySource src(b, 16);
+  Context ctx;
+  ctx.max_bytes = size_t(4) << 20;
+  fmf::Collective one;
+  EXPECT_EQ(encode_fmf_streamed(src, b.desc(), exact->second, ctx, one).status().code(), StatusCode::invalid_argument);
+}
