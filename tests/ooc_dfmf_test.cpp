@@ -238,7 +238,7 @@ TEST(StreamingExact, GramThatDoesNotFitIsRefusedNamingTheSizes) {
   EXPECT_TRUE(roomy->exact);
   EXPECT_EQ(roomy->passes, 2);
   EXPECT_TRUE(plan_streamed_fmf(automatic->second, b.desc(), size_t(1) << 30)->exact);
-  // 486^2 doubles = 1.8 MiB, x 3 with the solver: does not fit 4 MiB.
+  // 486^2 doubles = 1.8 MiB, x 3 with the solver + the 16 MiB allowance: does not fit 4 MiB.
   auto tight = plan_streamed_fmf(exact->second, b.desc(), size_t(4) << 20);
   ASSERT_FALSE(tight.ok());
   EXPECT_EQ(tight.status().code(), StatusCode::invalid_argument);

@@ -44,9 +44,12 @@ Result<StreamPlan> plan_streamed_fmf(const Params& p, const BtfDesc& desc, size_
   // SxV (float) and the Gaussian rows on the texels; 16 MiB for small matrices and stacks.
   const uint64_t randomized = m * plan.l * (8 + 8 + 4 + 4 + 4) + n * plan.l * (4 + 4) + base;
   const uint64_t exact = fmf::streaming_exact_bytes(m) + n * max_rank * 4 + base;  // + SxV
-  if (plan.exact && exact > max_bytes) {
+  // Only the Gram part is the exact path's own; when the factors (texel side, needed by either
+  // path) do not fit, the caller's chunk sizing reports the whole need.
+  const uint64_t gram = fmf::streaming_exact_bytes(m) + (uint64_t(16) << 20);
+  if (plan.exact && gram > max_bytes) {
     const std::string what = std::to_string(m) + " x " + std::to_string(m) + " Gram matrix (" + format_bytes(m * m * 8) +
-                             " of double; " + format_bytes(exact) + " with the eigen-solver's workspace and the factors)";
+                             " of double; " + format_bytes(gram) + " with the eigen-solver's workspace)";
     if (svd == "exact")
       return invalid_argument("fmf out of core: svd=exact needs the " + what + ", more than --max-memory " + format_bytes(max_bytes) +
                               "; use svd=randomized or give more memory");
