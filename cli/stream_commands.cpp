@@ -205,10 +205,19 @@ bool bench_streamed(const Global& g, const BenchArgs& a, int& code) {
     auto model = encode_streamed(g, a.in, desc.value(), spec, "", temp_dir, *limit, a.seed, report, temp);
     if (!model.ok()) return code = fail(g, model.status().with_context(a.in)), true;
     const double enc_s = since(t0);
-    auto file = BdiChunks::open(report["work_file"].get<std::string>());
-    if (!file.ok()) return code = fail(g, file.status()), true;
+    // The reference is what the factorization read: the raw .btfc in place, or the working file.
+    const std::string ref = report["work_file"].get<std::string>();
     const auto t1 = Clock::now();
-    auto m = compare_streamed(file.value(), *model.value());  // decodes chunk by chunk while comparing
+    Result<Metrics> m = invalid_argument(ref + ": no reference");
+    if (ref == a.in && is_raw_btfc_file(a.in)) {
+      auto src = open_raw_chunks(a.in, uint32_t(report["chunk_texels"].get<uint64_t>() / uint64_t(desc->width)));
+      if (!src.ok()) return code = fail(g, src.status()), true;
+      m = compare_streamed(*src.value(), desc.value(), a.in, *model.value());  // decodes chunk by chunk while comparing
+    } else {
+      auto file = BdiChunks::open(ref);
+      if (!file.ok()) return code = fail(g, file.status()), true;
+      m = compare_streamed(file.value(), *model.value());
+    }
     if (!m.ok()) return code = fail(g, m.status()), true;
     const double dec_s = since(t1);
     const double ratio = double(desc->num_values()) * 4.0 / double(model.value()->payload_bytes());

@@ -16,6 +16,7 @@
 #include <future>
 #include <mutex>
 
+#include "codecs/fmf/ooc_fmf.h"
 #include "core/container.h"
 #include "formats/bonn/bdi_work.h"
 #include "formats/bonn/bonn_btf.h"
@@ -440,19 +441,23 @@ Status decode_to_bdi(const Model& model, const std::string& path, size_t max_byt
 namespace btfc {
 
 Result<Metrics> compare_streamed(const BdiChunks& ref, const Model& model) {
-  const BtfDesc& d = ref.desc();
-  if (model.desc().abrdf_size() != d.abrdf_size() || model.desc().num_texels() != d.num_texels())
-    return invalid_argument(ref.path() + ": model shape differs from the reference BTF");
+  return compare_streamed(BdiChunkSource(ref), ref.desc(), ref.path(), model);
+}
+
+Result<Metrics> compare_streamed(const fmf::ChunkSource& ref, const BtfDesc& d, const std::string& path, const Model& model) {
+  if (model.desc().abrdf_size() != d.abrdf_size() || model.desc().num_texels() != d.num_texels() || ref.rows() != d.abrdf_size() ||
+      ref.texels() != d.num_texels())
+    return invalid_argument(path + ": model shape differs from the reference BTF");
+  if (ref.chunk_count(0) % uint64_t(d.width) != 0) return invalid_argument(path + ": reference chunks are not whole texel rows");
   double se = 0, sr = 0, mx = 0, peak = 0;
-  std::vector<uint16_t> raw;
+  std::vector<uint8_t> raw;
   std::vector<float> a;
   Btf band;
   for (uint64_t c = 0; c < ref.num_chunks(); ++c) {
-    raw.resize(ref.chunk_bytes(c) / 2);
-    a.resize(raw.size());
-    BTFC_RETURN_IF_ERROR(ref.read_raw(c, raw.data()));
-    BTFC_RETURN_IF_ERROR(ref.decode(c, raw.data(), a.data()));
-    // BDI chunks are whole texel rows (formats.md 2.2).
+    raw.resize(ref.raw_buffer_bytes(c));
+    a.resize(ref.chunk_count(c) * ref.rows());
+    BTFC_RETURN_IF_ERROR(ref.load(c, raw.empty() ? nullptr : raw.data(), a.data()));
+    // Chunks are whole texel rows (BDI: formats.md 2.2; raw .btfc: open_raw_chunks).
     DecodeRequest req;
     req.y0 = int(ref.chunk_first(c) / uint64_t(d.width));
     req.height = int(ref.chunk_count(c) / uint64_t(d.width));

@@ -61,4 +61,6 @@ class BdiChunks;
 // RMSE, relative L2, PSNR (peak rule of core/metrics.h) and max |error| of `model` against the
 // BTF in `ref`, chunk by chunk; mean_ssim is NaN (SSIM needs whole images).
 Result<Metrics> compare_streamed(const BdiChunks& ref, const Model& model);
+// The same against any chunk source of whole texel rows (`path` names it in errors).
+Result<Metrics> compare_streamed(const fmf::ChunkSource& ref, const BtfDesc& desc, const std::string& path, const Model& model);
 }  // namespace btfc

@@ -129,6 +129,14 @@ check decompress-too-big 1 "$BTFC" decompress "$W/ooc.btfc" -o "$W/d2.btfc" --ma
 expect_grep decompress-msg "decompress to a Bonn BDI" "$W/err.txt"
 check bench-ooc 0 "$BTFC" --json bench "$W/s.btfc" -c $SPEC --max-memory 40M
 python3 -c "import json; r=json.load(open('$W/out.txt'))[0]; assert 1e-3 < r['rel_l2'] < 0.5 and r['out_of_core']['passes'] == 4, r; print('ok   bench-ooc', r['rel_l2'])" || fails=$((fails + 1))
+cp "$W/out.txt" "$W/bench_ooc.json"
+# With room for float chunks the raw .btfc is streamed in place, and bench compares against it.
+check bench-ooc-raw 0 "$BTFC" --json bench "$W/s.btfc" -c $SPEC --max-memory 80M
+python3 -c "
+import json; r=json.load(open('$W/out.txt'))[0]; w=json.load(open('$W/bench_ooc.json'))[0]
+assert 'in place' in r['out_of_core']['work_file_note'], r
+assert abs(r['rel_l2'] - w['rel_l2']) / w['rel_l2'] < 0.01, (r['rel_l2'], w['rel_l2'])
+print('ok   bench-ooc-raw', r['rel_l2'])" || fails=$((fails + 1))
 
 rm -rf "$W"
 [ "$fails" -eq 0 ] && echo "all stream checks passed" || echo "$fails stream checks FAILED"
