@@ -11,6 +11,7 @@
 #include "cli/commands.h"
 #include "codecs/codec.h"
 #include "codecs/fmf/ooc_fmf.h"
+#include "core/limits.h"
 #include "core/memory.h"
 #include "formats/bonn/bdi_work.h"
 #include "formats/btf_io.h"
@@ -25,7 +26,14 @@ double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock:
 json num(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
 bool ends_with(const std::string& s, const std::string& x) { return s.size() >= x.size() && s.compare(s.size() - x.size(), x.size(), x) == 0; }
 
-Result<size_t> limit_of(const std::string& text) { return text.empty() ? Result<size_t>(default_max_memory()) : parse_size(text); }
+// The --max-memory limit (default: most of the free RAM). A limit the user gave also becomes the
+// process-wide one (core/limits.h), so in-core decodes and model loads are held to it too.
+Result<size_t> limit_of(const std::string& text) {
+  if (text.empty()) return default_max_memory();
+  BTFC_ASSIGN_OR_RETURN(size_t bytes, parse_size(text));
+  set_memory_limit(bytes);
+  return bytes;
+}
 
 // Removes a temporary working file on every exit path.
 struct TempFile {

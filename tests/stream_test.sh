@@ -127,6 +127,10 @@ check cmp-bdi 0 "$BTFC" --json compare --no-ssim "$W/ooc.btfc" "$W/d.btf"
 python3 -c "import json; m=json.load(open('$W/out.txt')); assert m['rel_l2'] < 2e-3, m; print('ok   bdi-decoded', m['rel_l2'])" || fails=$((fails + 1))
 check decompress-too-big 1 "$BTFC" decompress "$W/ooc.btfc" -o "$W/d2.btfc" --max-memory 8M
 expect_grep decompress-msg "decompress to a Bonn BDI" "$W/err.txt"
+# A given --max-memory is also the in-core limit: a region decode beyond it is refused, one within it runs.
+check decompress-region-limit 1 "$BTFC" decompress "$W/ooc.btfc" -o "$W/r.btfc" --region 0,0,40,40 --max-memory 8M
+expect_grep decompress-region-msg "over the memory limit of 8388608 bytes" "$W/err.txt"
+check decompress-region-fits 0 "$BTFC" -q decompress "$W/ooc.btfc" -o "$W/r.btfc" --region 0,0,8,8 --max-memory 8M
 check bench-ooc 0 "$BTFC" --json bench "$W/s.btfc" -c $SPEC --max-memory 40M
 python3 -c "import json; r=json.load(open('$W/out.txt'))[0]; assert 1e-3 < r['rel_l2'] < 0.5 and r['out_of_core']['passes'] == 4, r; print('ok   bench-ooc', r['rel_l2'])" || fails=$((fails + 1))
 cp "$W/out.txt" "$W/bench_ooc.json"
