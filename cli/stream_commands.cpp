@@ -86,7 +86,16 @@ Result<std::unique_ptr<Model>> encode_streamed(const Global& g, const std::strin
                   {"buffer_bytes", enc.stats.buffer_bytes}};
     return std::move(enc.model);
   };
-  if (work_file.empty() && is_raw_btfc_file(in)) {
+  // In place only while the page cache can hold the raw file across the passes: beyond the
+  // available RAM every pass reads the disk, and the half working file halves those bytes.
+  std::error_code fec;
+  const uint64_t raw_bytes = is_raw_btfc_file(in) ? std::filesystem::file_size(in, fec) : 0;
+  const uint64_t avail = mem_available_bytes();
+  std::string why_work;
+  if (work_file.empty() && raw_bytes > 0 && avail > 0 && raw_bytes > avail)
+    why_work = in + " (" + format_bytes(raw_bytes) + ") is larger than the available RAM (" + format_bytes(avail) +
+               "): a half-float working file halves the disk reads of every pass";
+  if (work_file.empty() && raw_bytes > 0 && why_work.empty()) {
     // A raw .btfc is texel-major already: stream its data tensor in place, no working file.
     // Its chunks are mapped (two at a time: 8 bytes per value); sized for 12, what the pread
     // fallback (one float copy + two float blocks) needs, so either path fits the limit.
@@ -105,6 +114,7 @@ Result<std::unique_ptr<Model>> encode_streamed(const Global& g, const std::strin
     temp.path = work;
   }
   BTFC_ASSIGN_OR_RETURN(WorkFile wf, prepare_work_file(in, work, lines, limit, &progress));
+  if (!why_work.empty()) wf.note = why_work + (wf.note.empty() ? "" : "; " + wf.note);
   if (!wf.note.empty() && !g.quiet && !g.json) std::cerr << "note: " << wf.note << "\n";
   BTFC_ASSIGN_OR_RETURN(BdiChunks file, BdiChunks::open(wf.path));
   const uint64_t chunk_buffers = k_stream_bytes_per_value * desc.abrdf_size() * file.chunk_count(0);
