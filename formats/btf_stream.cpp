@@ -190,6 +190,11 @@ class RawChunks final : public fmf::ChunkSource {
     m_chunks = (n + m_per - 1) / m_per;
     m_checked.assign(m_chunks, 0);
     m_page = uint64_t(::sysconf(_SC_PAGESIZE));
+    // Mapped when the floats are aligned and the file system maps (some FUSE ones do not).
+    if (m_b.data_offset() % alignof(float) == 0) {
+      void* p = ::mmap(nullptr, size_t(m_page), PROT_READ, MAP_SHARED, m_b.fd(), 0);
+      if (p != MAP_FAILED) m_mappable = true, ::munmap(p, size_t(m_page));
+    }
   }
   size_t rows() const override { return m_b.desc().abrdf_size(); }
   size_t num_chunks() const override { return m_chunks; }
@@ -204,7 +209,7 @@ class RawChunks final : public fmf::ChunkSource {
     std::memcpy(dst, raw, raw_bytes(c));
     return {};
   }
-  bool mappable() const override { return m_b.data_offset() % alignof(float) == 0; }
+  bool mappable() const override { return m_mappable; }
   Result<const float*> map(size_t c) const override {
     const uint64_t off = chunk_offset(c), base = off / m_page * m_page;
     void* p = ::mmap(nullptr, size_t(raw_bytes(c) + (off - base)), PROT_READ, MAP_SHARED | MAP_POPULATE, m_b.fd(), off_t(base));
@@ -247,6 +252,7 @@ class RawChunks final : public fmf::ChunkSource {
   }
   RawBands m_b;
   uint64_t m_per = 1, m_chunks = 0, m_page = 4096;
+  bool m_mappable = false;
   mutable std::mutex m_mutex;
   mutable uint64_t m_next = 0;
   mutable uint32_t m_crc = 0;
