@@ -60,6 +60,11 @@ std::string fingerprint(const std::string& input) {
          "\" source_mtime=\"" + std::to_string(mtime) + "\"";
 }
 
+Status non_finite_error(const std::string& path, const BtfDesc& d, uint64_t texel) {
+  return corrupt_data(path + ": non-finite value at texel (" + std::to_string(texel % uint64_t(d.width)) + ", " +
+                      std::to_string(texel / uint64_t(d.width)) + ")");
+}
+
 // Streams a raw .btfc's data tensor in texel bands, verifying the tensor's CRC at the end.
 class RawBands {
  public:
@@ -117,12 +122,7 @@ class RawBands {
     if (m_next == m_desc.num_texels() && m_crc != m_crc_want)
       return corrupt_data(m_path + ": chunk TNSR 'data': CRC mismatch (the file is corrupt)");
     const size_t values = size_t(n * m_desc.abrdf_size()), i = find_non_finite(dst, values);
-    if (i < values) {
-      const uint64_t t = t0 + i / m_desc.abrdf_size();
-      return corrupt_data(m_path + ": non-finite value at texel (" + std::to_string(t % uint64_t(m_desc.width)) + ", " +
-                          std::to_string(t / uint64_t(m_desc.width)) + ")");
-    }
-    return {};
+    return i < values ? non_finite_error(m_path, m_desc, t0 + i / m_desc.abrdf_size()) : Status{};
   }
 
  private:
@@ -240,11 +240,7 @@ class RawChunks final : public fmf::ChunkSource {
       m_crc = crc_and_check(m_crc, v, n, m_checked[c] ? nullptr : &bad);
     else if (!m_checked[c])
       bad = find_non_finite(v, n);
-    if (bad < n) {
-      const uint64_t t = chunk_first(c) + bad / rows();
-      return corrupt_data(m_b.path() + ": non-finite value at texel (" + std::to_string(t % uint64_t(m_b.desc().width)) + ", " +
-                          std::to_string(t / uint64_t(m_b.desc().width)) + ")");
-    }
+    if (bad < n) return non_finite_error(m_b.path(), m_b.desc(), chunk_first(c) + bad / rows());
     m_checked[c] = 1;
     if (crc && ++m_next == m_chunks && m_crc != m_b.crc_want())
       return corrupt_data(m_b.path() + ": chunk TNSR 'data': CRC mismatch (the file is corrupt)");

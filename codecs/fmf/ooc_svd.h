@@ -22,8 +22,9 @@
 // Sums run in double, so the result equals the single-process one up to float rounding.
 //
 // Memory: one raw chunk buffer and two float chunks (a helper thread reads and decodes the next
-// chunk while the current one is multiplied), or two mapped chunks for a mappable source, + O((m + n_local) l) for Y, Q and W^T. The caller sizes
-// chunks so this stays under its limit (ooc_fmf.h).
+// chunk while the current one is multiplied), or two mapped chunks for a mappable source, plus
+// O((m + n_local) l) for Y, Q and W^T. The caller sizes chunks so this stays under its limit
+// (ooc_fmf.h).
 #pragma once
 #include <cstdint>
 #include <string>
