@@ -127,12 +127,14 @@ Result<std::unique_ptr<Model>> encode_streamed(const Global& g, const std::strin
 }
 
 void print_report(const json& r) {
-  std::cout << "  out of core: working file " << r["work_file"].get<std::string>()
-            << (r["work_file_built"].get<bool>() ? " (built in " + std::to_string(r["work_file_seconds"].get<double>()) + " s)" : r["work_file_reused"].get<bool>() ? " (reused)" : " (the input)")
+  const bool in_place = r["work_file_note"].get<std::string>().find("in place") != std::string::npos;
+  std::cout << "  out of core: " << (in_place ? "raw .btfc streamed in place (no working file) " : "working file ")
+            << r["work_file"].get<std::string>()
+            << (in_place ? "" : r["work_file_built"].get<bool>() ? " (built in " + std::to_string(r["work_file_seconds"].get<double>()) + " s)" : r["work_file_reused"].get<bool>() ? " (reused)" : " (the input)")
             << ", " << r["chunks"] << " chunks of " << r["chunk_texels"] << " texels\n"
             << "  " << r["passes"] << " passes, " << format_bytes(r["bytes_read"].get<uint64_t>()) << " read, factorization "
             << r["factorize_seconds"].get<double>() << " s, peak RSS " << format_bytes(r["peak_rss_bytes"].get<uint64_t>())
-            << " (limit " << format_bytes(r["max_memory"].get<uint64_t>()) << ")\n";
+            << " (limit " << format_bytes(r["max_memory"].get<uint64_t>()) << " + 200 MiB fixed overhead)\n";
 }
 
 }  // namespace
