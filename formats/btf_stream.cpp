@@ -9,6 +9,7 @@
 #include <zlib.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -179,13 +180,14 @@ uint32_t crc_and_check(uint32_t crc, const float* v, size_t n, size_t* bad) {
 // texel-major already (each texel's ABRDF contiguous), so no working file is needed, and the
 // chunks are mapped, not copied: the GEMMs read the page cache directly (no pread copy, no
 // decode), which is what keeps out-of-core passes near in-core speed. The tensor CRC is
-// accumulated over the first in-order sweep (pass 0 maps every chunk in order) and checked when
-// that sweep completes; each chunk's values are checked finite the first time it is seen.
+// accumulated over the first in-order sweep of each process's chunks (pass 0) and checked
+// after that pass, the processes' parts joined (finish_first_pass): so MPI ranks can each map
+// only their own chunks. Each chunk's values are checked finite the first time it is seen.
 // (A file truncated by another process while mapped would raise SIGBUS; its size is checked
 // at open.) A tensor at an offset not aligned for floats falls back to pread + copy.
 class RawChunks final : public fmf::ChunkSource {
  public:
-  RawChunks(RawBands b, uint64_t per_chunk) : m_b(std::move(b)), m_per(per_chunk), m_crc(m_b.crc_prefix()) {
+  RawChunks(RawBands b, uint64_t per_chunk) : m_b(std::move(b)), m_per(per_chunk) {
     const uint64_t n = m_b.desc().num_texels();
     m_chunks = (n + m_per - 1) / m_per;
     m_checked.assign(m_chunks, 0);
@@ -229,10 +231,12 @@ class RawChunks final : public fmf::ChunkSource {
 
  private:
   uint64_t chunk_offset(size_t c) const { return m_b.data_offset() + uint64_t(chunk_first(c)) * rows() * 4; }
-  // First sight of chunk c: values finite; in-order sweep from chunk 0: the tensor CRC. When
-  // both are due they share one trip through memory (crc_and_check).
+  // First sight of chunk c: values finite. The first chunk this process maps starts its CRC
+  // sweep (from the tensor head's CRC when it is chunk 0, else from 0); each next chunk in order
+  // extends it. Both tests share one trip through memory (crc_and_check).
   Status verify(size_t c, const float* v) const {
     std::lock_guard<std::mutex> lock(m_mutex);
+    if (m_start == k_none) m_start = m_next = c, m_crc = c == 0 ? m_b.crc_prefix() : 0;
     const size_t n = chunk_count(c) * rows();
     const bool crc = c == m_next;
     size_t bad = n;
@@ -242,15 +246,47 @@ class RawChunks final : public fmf::ChunkSource {
       bad = find_non_finite(v, n);
     if (bad < n) return non_finite_error(m_b.path(), m_b.desc(), chunk_first(c) + bad / rows());
     m_checked[c] = 1;
-    if (crc && ++m_next == m_chunks && m_crc != m_b.crc_want())
-      return corrupt_data(m_b.path() + ": chunk TNSR 'data': CRC mismatch (the file is corrupt)");
+    if (crc) ++m_next;
     return {};
   }
+
+ public:
+  // The processes' sweeps [start, next) with their CRCs, summed into one table (each process
+  // fills its own row), are joined in chunk order with crc32_combine and compared with the
+  // tensor's CRC, on every process alike. Sweeps that do not tile every chunk (a caller that
+  // streamed only some chunks) cannot be checked and are not.
+  Status finish_first_pass(fmf::Collective& coll) const override {
+    const size_t P = size_t(coll.size()), r = size_t(coll.rank());
+    std::vector<double> t(3 * P, 0.0);
+    {
+      std::lock_guard<std::mutex> lock(m_mutex);
+      if (m_start != k_none && m_next > m_start) t[3 * r] = double(m_start) + 1, t[3 * r + 1] = double(m_next), t[3 * r + 2] = double(m_crc);
+    }
+    BTFC_RETURN_IF_ERROR(coll.allreduce_sum(t.data(), t.size()));
+    std::vector<std::array<uint64_t, 3>> parts;  // start, end, crc (all exact in a double)
+    for (size_t i = 0; i < P; ++i)
+      if (t[3 * i] > 0) parts.push_back({uint64_t(t[3 * i]) - 1, uint64_t(t[3 * i + 1]), uint64_t(t[3 * i + 2])});
+    std::sort(parts.begin(), parts.end());
+    uint64_t expect = 0;
+    uint32_t crc = 0;
+    for (const auto& [a, b, c] : parts) {
+      if (a != expect) return {};
+      const uint64_t bytes = (uint64_t(chunk_first(b - 1)) + chunk_count(b - 1) - chunk_first(a)) * rows() * 4;
+      crc = a == 0 ? uint32_t(c) : uint32_t(crc32_combine(crc, uint32_t(c), z_off_t(bytes)));
+      expect = b;
+    }
+    if (expect != m_chunks) return {};
+    if (crc != m_b.crc_want()) return corrupt_data(m_b.path() + ": chunk TNSR 'data': CRC mismatch (the file is corrupt)");
+    return {};
+  }
+
+ private:
+  static constexpr uint64_t k_none = ~uint64_t(0);
   RawBands m_b;
   uint64_t m_per = 1, m_chunks = 0, m_page = 4096;
   bool m_mappable = false;
   mutable std::mutex m_mutex;
-  mutable uint64_t m_next = 0;
+  mutable uint64_t m_start = k_none, m_next = 0;
   mutable uint32_t m_crc = 0;
   mutable std::vector<uint8_t> m_checked;
 };

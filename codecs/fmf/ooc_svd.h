@@ -35,6 +35,8 @@
 
 namespace btfc::fmf {
 
+class Collective;
+
 // Column chunks of B. read() does the I/O (called from a helper thread, may run concurrently
 // with decode() of another chunk); decode() turns raw bytes into a column-major float block
 // (rows() x chunk_count(c)).
@@ -62,6 +64,10 @@ class ChunkSource {
   virtual bool mappable() const { return false; }
   virtual Result<const float*> map(size_t c) const { return unsupported("this chunk source cannot map chunks"); }
   virtual void unmap(size_t c, const float* p) const {}
+  // Called by every process once the first pass has seen every chunk (each by its owner): a
+  // source whose integrity check spans the whole file (a raw .btfc's tensor CRC) combines the
+  // processes' parts here through `coll`, and every process returns the same status.
+  virtual Status finish_first_pass(Collective& coll) const { return {}; }
   size_t texels() const { return num_chunks() ? chunk_first(num_chunks() - 1) + chunk_count(num_chunks() - 1) : 0; }
 };
 
