@@ -11,6 +11,7 @@
 #include "cli/commands.h"
 #include "codecs/codec.h"
 #include "codecs/fmf/ooc_fmf.h"
+#include "core/limits.h"
 #include "core/memory.h"
 #include "formats/bonn/bdi_work.h"
 #include "formats/btf_io.h"
@@ -25,7 +26,14 @@ double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock:
 json num(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
 bool ends_with(const std::string& s, const std::string& x) { return s.size() >= x.size() && s.compare(s.size() - x.size(), x.size(), x) == 0; }
 
-Result<size_t> limit_of(const std::string& text) { return text.empty() ? Result<size_t>(default_max_memory()) : parse_size(text); }
+// The --max-memory limit (default: most of the free RAM). A limit the user gave also becomes the
+// process-wide one (core/limits.h), so in-core decodes and model loads are held to it too.
+Result<size_t> limit_of(const std::string& text) {
+  if (text.empty()) return default_max_memory();
+  BTFC_ASSIGN_OR_RETURN(size_t bytes, parse_size(text));
+  set_memory_limit(bytes);
+  return bytes;
+}
 
 // Removes a temporary working file on every exit path.
 struct TempFile {
@@ -77,7 +85,16 @@ Result<std::unique_ptr<Model>> encode_streamed(const Global& g, const std::strin
                   {"buffer_bytes", enc.stats.buffer_bytes}};
     return std::move(enc.model);
   };
-  if (work_file.empty() && is_raw_btfc_file(in)) {
+  // In place only while the page cache can hold the raw file across the passes: beyond the
+  // available RAM every pass reads the disk, and the half working file halves those bytes.
+  std::error_code fec;
+  const uint64_t raw_bytes = is_raw_btfc_file(in) ? std::filesystem::file_size(in, fec) : 0;
+  const uint64_t avail = mem_available_bytes();
+  std::string why_work;
+  if (work_file.empty() && raw_bytes > 0 && avail > 0 && raw_bytes > avail)
+    why_work = in + " (" + format_bytes(raw_bytes) + ") is larger than the available RAM (" + format_bytes(avail) +
+               "): a half-float working file halves the disk reads of every pass";
+  if (work_file.empty() && raw_bytes > 0 && why_work.empty()) {
     // A raw .btfc is texel-major already: stream its data tensor in place, no working file.
     // Its chunks are mapped (two at a time: 8 bytes per value); sized for 12, what the pread
     // fallback (one float copy + two float blocks) needs, so either path fits the limit.
@@ -96,6 +113,7 @@ Result<std::unique_ptr<Model>> encode_streamed(const Global& g, const std::strin
     temp.path = work;
   }
   BTFC_ASSIGN_OR_RETURN(WorkFile wf, prepare_work_file(in, work, lines, limit, &progress));
+  if (!why_work.empty()) wf.note = why_work + (wf.note.empty() ? "" : "; " + wf.note);
   if (!wf.note.empty() && !g.quiet && !g.json) std::cerr << "note: " << wf.note << "\n";
   BTFC_ASSIGN_OR_RETURN(BdiChunks file, BdiChunks::open(wf.path));
   const uint64_t chunk_buffers = k_stream_bytes_per_value * desc.abrdf_size() * file.chunk_count(0);
@@ -108,12 +126,14 @@ Result<std::unique_ptr<Model>> encode_streamed(const Global& g, const std::strin
 }
 
 void print_report(const json& r) {
-  std::cout << "  out of core: working file " << r["work_file"].get<std::string>()
-            << (r["work_file_built"].get<bool>() ? " (built in " + std::to_string(r["work_file_seconds"].get<double>()) + " s)" : r["work_file_reused"].get<bool>() ? " (reused)" : " (the input)")
+  const bool in_place = r["work_file_note"].get<std::string>().find("in place") != std::string::npos;
+  std::cout << "  out of core: " << (in_place ? "raw .btfc streamed in place (no working file) " : "working file ")
+            << r["work_file"].get<std::string>()
+            << (in_place ? "" : r["work_file_built"].get<bool>() ? " (built in " + std::to_string(r["work_file_seconds"].get<double>()) + " s)" : r["work_file_reused"].get<bool>() ? " (reused)" : " (the input)")
             << ", " << r["chunks"] << " chunks of " << r["chunk_texels"] << " texels\n"
             << "  " << r["passes"] << " passes, " << format_bytes(r["bytes_read"].get<uint64_t>()) << " read, factorization "
             << r["factorize_seconds"].get<double>() << " s, peak RSS " << format_bytes(r["peak_rss_bytes"].get<uint64_t>())
-            << " (limit " << format_bytes(r["max_memory"].get<uint64_t>()) << ")\n";
+            << " (limit " << format_bytes(r["max_memory"].get<uint64_t>()) << " + 200 MiB fixed overhead)\n";
 }
 
 }  // namespace
@@ -204,10 +224,19 @@ bool bench_streamed(const Global& g, const BenchArgs& a, int& code) {
     auto model = encode_streamed(g, a.in, desc.value(), spec, "", temp_dir, *limit, a.seed, report, temp);
     if (!model.ok()) return code = fail(g, model.status().with_context(a.in)), true;
     const double enc_s = since(t0);
-    auto file = BdiChunks::open(report["work_file"].get<std::string>());
-    if (!file.ok()) return code = fail(g, file.status()), true;
+    // The reference is what the factorization read: the raw .btfc in place, or the working file.
+    const std::string ref = report["work_file"].get<std::string>();
     const auto t1 = Clock::now();
-    auto m = compare_streamed(file.value(), *model.value());  // decodes chunk by chunk while comparing
+    Result<Metrics> m = invalid_argument(ref + ": no reference");
+    if (ref == a.in && is_raw_btfc_file(a.in)) {
+      auto src = open_raw_chunks(a.in, uint32_t(report["chunk_texels"].get<uint64_t>() / uint64_t(desc->width)));
+      if (!src.ok()) return code = fail(g, src.status()), true;
+      m = compare_streamed(*src.value(), desc.value(), a.in, *model.value());  // decodes chunk by chunk while comparing
+    } else {
+      auto file = BdiChunks::open(ref);
+      if (!file.ok()) return code = fail(g, file.status()), true;
+      m = compare_streamed(file.value(), *model.value());
+    }
     if (!m.ok()) return code = fail(g, m.status()), true;
     const double dec_s = since(t1);
     const double ratio = double(desc->num_values()) * 4.0 / double(model.value()->payload_bytes());

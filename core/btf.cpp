@@ -139,7 +139,7 @@ Result<Btf> Btf::create(const BtfDesc& desc, size_t max_bytes) {
   if (desc.num_values() > max_bytes / sizeof(float))
     return invalid_argument("BTF of " + desc.summary() + " needs " + std::to_string(desc.num_values() * 4) + " bytes (" +
                             std::to_string(desc.num_values() * 4 >> 20) + " MiB), over the memory limit of " +
-                            std::to_string(max_bytes) + " bytes (BTFC_MAX_MEMORY)");
+                            std::to_string(max_bytes) + " bytes (--max-memory or BTFC_MAX_MEMORY)");
   Btf b;
   b.m_desc = desc;
   try {

@@ -64,7 +64,7 @@ Status check_memory(size_t bytes, const std::string& what) {
   if (bytes <= lim) return {};
   return invalid_argument(what + " needs " + std::to_string(bytes) + " bytes (" + std::to_string(bytes >> 20) +
                           " MiB), over the memory limit of " + std::to_string(lim) +
-                          " bytes (set BTFC_MAX_MEMORY to raise it)");
+                          " bytes (raise it with --max-memory or BTFC_MAX_MEMORY)");
 }
 
 }  // namespace btfc

@@ -30,7 +30,8 @@ void set_memory_limit(size_t bytes);
 // unknown suffix).
 Result<size_t> parse_byte_size(const std::string& text);
 // ok when `bytes` fit the limit, else invalid_argument "<what> needs N bytes (X MiB), over the
-// memory limit of L bytes (set BTFC_MAX_MEMORY to raise it)".
+// memory limit of L bytes (raise it with --max-memory or BTFC_MAX_MEMORY)". The CLI's --max-memory
+// (compress, decompress, bench) sets this limit when given.
 Status check_memory(size_t bytes, const std::string& what);
 
 }  // namespace btfc

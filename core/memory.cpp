@@ -20,16 +20,21 @@ Result<size_t> parse_size(const std::string& text, const std::string& what) {
   return r;
 }
 
-size_t default_max_memory() {
+uint64_t mem_available_bytes() {
   std::ifstream f("/proc/meminfo");
   std::string line;
   while (std::getline(f, line)) {
     std::istringstream ss(line);
     std::string key;
     unsigned long long kb = 0;
-    if (ss >> key >> kb && key == "MemAvailable:" && kb > 0) return size_t(double(kb) * 1024 * 0.8);
+    if (ss >> key >> kb && key == "MemAvailable:" && kb > 0) return uint64_t(kb) * 1024;
   }
-  return size_t(4) << 30;
+  return 0;
+}
+
+size_t default_max_memory() {
+  const uint64_t avail = mem_available_bytes();
+  return avail ? size_t(double(avail) * 0.8) : size_t(4) << 30;
 }
 
 std::string format_bytes(uint64_t b) {

@@ -18,6 +18,8 @@ Result<size_t> parse_size(const std::string& text, const std::string& what = "--
 // The default limit: 80 % of MemAvailable in /proc/meminfo (the rest is left to the page cache
 // and other processes); 4 GiB when /proc/meminfo cannot be read.
 size_t default_max_memory();
+// MemAvailable in /proc/meminfo in bytes (free RAM plus reclaimable page cache), 0 when unknown.
+uint64_t mem_available_bytes();
 
 
 // "1.50 GiB", "512.0 MiB" for messages.

@@ -1,21 +1,16 @@
 // Bounded-memory BTF input / output; see btf_stream.h.
 #include "formats/btf_stream.h"
 
-#include <fcntl.h>
-#include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
-#include <omp.h>
-#include <zlib.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstring>
 #include <filesystem>
 #include <future>
-#include <mutex>
 
+#include "codecs/fmf/ooc_fmf.h"
 #include "core/container.h"
 #include "formats/bonn/bdi_work.h"
 #include "formats/bonn/bonn_btf.h"
@@ -26,13 +21,6 @@ namespace btfc {
 namespace {
 
 namespace fs = std::filesystem;
-
-bool is_raw_btfc(const std::string& path, BtfDesc* desc) {
-  auto rd = ContainerReader::open(path);
-  if (!rd.ok() || rd->codec().name != "raw") return false;
-  if (desc) *desc = rd->desc();
-  return true;
-}
 
 // "source=... bytes=... mtime=...": identifies the input a working file was made from.
 std::string fingerprint(const std::string& input) {
@@ -58,199 +46,6 @@ std::string fingerprint(const std::string& input) {
   return "source=\"" + q + "\" source_bytes=\"" + std::to_string(bytes) + "\" source_files=\"" + std::to_string(count) +
          "\" source_mtime=\"" + std::to_string(mtime) + "\"";
 }
-
-// Streams a raw .btfc's data tensor in texel bands, verifying the tensor's CRC at the end.
-class RawBands {
- public:
-  static Result<RawBands> open(const std::string& path) {
-    BTFC_ASSIGN_OR_RETURN(ContainerReader rd, ContainerReader::open(path));
-    const TensorInfo* ti = rd.find("data");
-    const BtfDesc& d = rd.desc();
-    if (!ti || ti->dtype != DType::f32 || ti->shape != std::vector<uint64_t>{d.num_texels(), d.abrdf_size()})
-      return corrupt_data(path + ": raw BTF without an f32 'data' tensor of [texels, abrdf_size]");
-    RawBands r;
-    r.m_path = path;
-    r.m_desc = d;
-    r.m_off = ti->offset;
-    r.m_crc_want = ti->crc;
-    const ChunkInfo* ch = nullptr;
-    for (const ChunkInfo& c : rd.chunks())
-      if (c.type == "TNSR" && c.offset <= ti->offset && ti->offset <= c.offset + c.size) ch = &c;
-    if (!ch) return corrupt_data(path + ": chunk TNSR 'data' not found");
-    r.m_fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-    if (r.m_fd < 0) return io_error(path + ": cannot open (" + std::strerror(errno) + ")");
-    // The CRC covers the chunk header's first 28 bytes, then the payload (tensor head + data).
-    const uint64_t start = ch->offset - 32;
-    std::vector<uint8_t> prefix(size_t(ti->offset - start));
-    BTFC_RETURN_IF_ERROR(r.pread_all(prefix.data(), prefix.size(), start));
-    r.m_crc = uint32_t(crc32(0, prefix.data(), 28));
-    r.m_crc = uint32_t(crc32(r.m_crc, prefix.data() + 32, uInt(prefix.size() - 32)));
-    return r;
-  }
-  RawBands(RawBands&& o) noexcept { *this = std::move(o); }
-  RawBands& operator=(RawBands&& o) noexcept {
-    std::swap(m_fd, o.m_fd);
-    m_path = o.m_path, m_desc = o.m_desc, m_off = o.m_off, m_crc = o.m_crc, m_crc_want = o.m_crc_want, m_next = o.m_next;
-    return *this;
-  }
-  ~RawBands() {
-    if (m_fd >= 0) ::close(m_fd);
-  }
-  const BtfDesc& desc() const { return m_desc; }
-  const std::string& path() const { return m_path; }
-  int fd() const { return m_fd; }
-  uint64_t data_offset() const { return m_off; }  // file offset of the first value
-  uint32_t crc_prefix() const { return m_crc; }  // CRC of the chunk head, before the data
-  uint32_t crc_want() const { return m_crc_want; }
-  // Texels [t0, t0 + n) at any position, no CRC (RawChunks keeps its own).
-  Status pread_texels(uint64_t t0, uint64_t n, float* dst) const {
-    return pread_all(dst, n * m_desc.abrdf_size() * 4, m_off + t0 * m_desc.abrdf_size() * 4);
-  }
-  // Texels [t0, t0 + n), read strictly in order (the CRC is sequential).
-  Status read(uint64_t t0, uint64_t n, float* dst) {
-    if (t0 != m_next) return invalid_argument(m_path + ": raw bands must be read in order");
-    const uint64_t bytes = n * m_desc.abrdf_size() * 4;
-    BTFC_RETURN_IF_ERROR(pread_all(dst, bytes, m_off + t0 * m_desc.abrdf_size() * 4));
-    m_crc = crc32_update(m_crc, dst, bytes);
-    m_next = t0 + n;
-    if (m_next == m_desc.num_texels() && m_crc != m_crc_want)
-      return corrupt_data(m_path + ": chunk TNSR 'data': CRC mismatch (the file is corrupt)");
-    const size_t values = size_t(n * m_desc.abrdf_size()), i = find_non_finite(dst, values);
-    if (i < values) {
-      const uint64_t t = t0 + i / m_desc.abrdf_size();
-      return corrupt_data(m_path + ": non-finite value at texel (" + std::to_string(t % uint64_t(m_desc.width)) + ", " +
-                          std::to_string(t / uint64_t(m_desc.width)) + ")");
-    }
-    return {};
-  }
-
- private:
-  RawBands() = default;
-  Status pread_all(void* dst, uint64_t n, uint64_t off) const {
-    uint8_t* p = static_cast<uint8_t*>(dst);
-    while (n > 0) {
-      const ssize_t r = ::pread(m_fd, p, size_t(std::min<uint64_t>(n, uint64_t(1) << 30)), off_t(off));
-      if (r < 0 && errno == EINTR) continue;
-      if (r <= 0) return io_error(m_path + ": read failed at offset " + std::to_string(off));
-      p += r, off += uint64_t(r), n -= uint64_t(r);
-    }
-    return {};
-  }
-  std::string m_path;
-  BtfDesc m_desc;
-  int m_fd = -1;
-  uint64_t m_off = 0, m_next = 0;
-  uint32_t m_crc = 0, m_crc_want = 0;
-};
-
-// crc32 of v[0, n) continuing `crc`, and (when bad is given) the index of the first non-finite
-// value in *bad (n when none). Each thread takes a contiguous piece and walks it in 256 KiB
-// blocks, testing each block while it is in cache and then CRC-ing it: one trip through memory
-// instead of two, which is most of the cost of the first pass over a mapped multi-GB tensor.
-uint32_t crc_and_check(uint32_t crc, const float* v, size_t n, size_t* bad) {
-  const int threads = std::max(1, omp_get_max_threads());
-  const size_t piece = (n + size_t(threads) - 1) / size_t(threads), block = size_t(1) << 16;
-  std::vector<uint32_t> part(size_t(threads), 0);
-  std::vector<size_t> first(size_t(threads), n);
-#pragma omp parallel for schedule(static, 1) num_threads(threads)
-  for (int t = 0; t < threads; ++t) {
-    const size_t a = std::min(n, size_t(t) * piece), b = std::min(n, a + piece);
-    uint32_t c = 0;
-    for (size_t i0 = a; i0 < b; i0 += block) {
-      const size_t k = std::min(block, b - i0);
-      if (bad && first[size_t(t)] == n) {
-        const size_t i = find_non_finite(v + i0, k);
-        if (i < k) first[size_t(t)] = i0 + i;
-      }
-      c = crc32_update(c, v + i0, k * 4);
-    }
-    part[size_t(t)] = c;
-  }
-  for (int t = 0; t < threads; ++t) {
-    const size_t a = std::min(n, size_t(t) * piece), b = std::min(n, a + piece);
-    if (b > a) crc = uint32_t(crc32_combine(crc, part[size_t(t)], z_off_t((b - a) * 4)));
-  }
-  if (bad) *bad = *std::min_element(first.begin(), first.end());
-  return crc;
-}
-
-// A raw .btfc read in place as column chunks of B for the streamed SVD: its data tensor is
-// texel-major already (each texel's ABRDF contiguous), so no working file is needed, and the
-// chunks are mapped, not copied: the GEMMs read the page cache directly (no pread copy, no
-// decode), which is what keeps out-of-core passes near in-core speed. The tensor CRC is
-// accumulated over the first in-order sweep (pass 0 maps every chunk in order) and checked when
-// that sweep completes; each chunk's values are checked finite the first time it is seen.
-// (A file truncated by another process while mapped would raise SIGBUS; its size is checked
-// at open.) A tensor at an offset not aligned for floats falls back to pread + copy.
-class RawChunks final : public fmf::ChunkSource {
- public:
-  RawChunks(RawBands b, uint64_t per_chunk) : m_b(std::move(b)), m_per(per_chunk), m_crc(m_b.crc_prefix()) {
-    const uint64_t n = m_b.desc().num_texels();
-    m_chunks = (n + m_per - 1) / m_per;
-    m_checked.assign(m_chunks, 0);
-    m_page = uint64_t(::sysconf(_SC_PAGESIZE));
-  }
-  size_t rows() const override { return m_b.desc().abrdf_size(); }
-  size_t num_chunks() const override { return m_chunks; }
-  size_t chunk_first(size_t c) const override { return c * m_per; }
-  size_t chunk_count(size_t c) const override { return std::min<uint64_t>(m_per, m_b.desc().num_texels() - c * m_per); }
-  size_t raw_bytes(size_t c) const override { return chunk_count(c) * rows() * 4; }
-  Status read(size_t c, void* raw) const override {
-    BTFC_RETURN_IF_ERROR(m_b.pread_texels(chunk_first(c), chunk_count(c), static_cast<float*>(raw)));
-    return verify(c, static_cast<const float*>(raw));
-  }
-  Status decode(size_t c, const void* raw, float* dst) const override {
-    std::memcpy(dst, raw, raw_bytes(c));
-    return {};
-  }
-  bool mappable() const override { return m_b.data_offset() % alignof(float) == 0; }
-  Result<const float*> map(size_t c) const override {
-    const uint64_t off = chunk_offset(c), base = off / m_page * m_page;
-    void* p = ::mmap(nullptr, size_t(raw_bytes(c) + (off - base)), PROT_READ, MAP_SHARED | MAP_POPULATE, m_b.fd(), off_t(base));
-    if (p == MAP_FAILED) return io_error(m_b.path() + ": cannot map texel chunk " + std::to_string(c) + " (" + std::strerror(errno) + ")");
-    const float* f = reinterpret_cast<const float*>(static_cast<const uint8_t*>(p) + (off - base));
-    Status s = verify(c, f);
-    if (!s.ok()) {
-      unmap(c, f);
-      return s;
-    }
-    return f;
-  }
-  void unmap(size_t c, const float* f) const override {
-    const uint64_t off = chunk_offset(c), base = off / m_page * m_page;
-    ::munmap(const_cast<uint8_t*>(reinterpret_cast<const uint8_t*>(f)) - (off - base), size_t(raw_bytes(c) + (off - base)));
-  }
-
- private:
-  uint64_t chunk_offset(size_t c) const { return m_b.data_offset() + uint64_t(chunk_first(c)) * rows() * 4; }
-  // First sight of chunk c: values finite; in-order sweep from chunk 0: the tensor CRC. When
-  // both are due they share one trip through memory (crc_and_check).
-  Status verify(size_t c, const float* v) const {
-    std::lock_guard<std::mutex> lock(m_mutex);
-    const size_t n = chunk_count(c) * rows();
-    const bool crc = c == m_next;
-    size_t bad = n;
-    if (crc)
-      m_crc = crc_and_check(m_crc, v, n, m_checked[c] ? nullptr : &bad);
-    else if (!m_checked[c])
-      bad = find_non_finite(v, n);
-    if (bad < n) {
-      const uint64_t t = chunk_first(c) + bad / rows();
-      return corrupt_data(m_b.path() + ": non-finite value at texel (" + std::to_string(t % uint64_t(m_b.desc().width)) + ", " +
-                          std::to_string(t / uint64_t(m_b.desc().width)) + ")");
-    }
-    m_checked[c] = 1;
-    if (crc && ++m_next == m_chunks && m_crc != m_b.crc_want())
-      return corrupt_data(m_b.path() + ": chunk TNSR 'data': CRC mismatch (the file is corrupt)");
-    return {};
-  }
-  RawBands m_b;
-  uint64_t m_per = 1, m_chunks = 0, m_page = 4096;
-  mutable std::mutex m_mutex;
-  mutable uint64_t m_next = 0;
-  mutable uint32_t m_crc = 0;
-  mutable std::vector<uint8_t> m_checked;
-};
 
 // Rows of texels per band for `bytes_per_value` bytes of buffer per value within max_bytes.
 uint64_t band_lines(const BtfDesc& d, uint64_t bytes_per_value, size_t max_bytes) {
@@ -322,15 +117,6 @@ Status fill(const std::string& input, BdiWriter& w, const BtfDesc& d, size_t max
 }
 
 }  // namespace
-
-Result<std::unique_ptr<fmf::ChunkSource>> open_raw_chunks(const std::string& path, uint32_t lines_per_chunk) {
-  if (!is_raw_btfc(path, nullptr)) return invalid_argument(path + ": not a raw (uncompressed) .btfc");
-  BTFC_ASSIGN_OR_RETURN(RawBands b, RawBands::open(path));
-  const uint64_t per = uint64_t(std::max<uint32_t>(lines_per_chunk, 1)) * uint64_t(b.desc().width);
-  return std::unique_ptr<fmf::ChunkSource>(std::make_unique<RawChunks>(std::move(b), per));
-}
-
-bool is_raw_btfc_file(const std::string& path) { return is_raw_btfc(path, nullptr); }
 
 Result<BtfDesc> probe_btf(const std::string& path) {
   std::error_code ec;
@@ -440,19 +226,23 @@ Status decode_to_bdi(const Model& model, const std::string& path, size_t max_byt
 namespace btfc {
 
 Result<Metrics> compare_streamed(const BdiChunks& ref, const Model& model) {
-  const BtfDesc& d = ref.desc();
-  if (model.desc().abrdf_size() != d.abrdf_size() || model.desc().num_texels() != d.num_texels())
-    return invalid_argument(ref.path() + ": model shape differs from the reference BTF");
+  return compare_streamed(BdiChunkSource(ref), ref.desc(), ref.path(), model);
+}
+
+Result<Metrics> compare_streamed(const fmf::ChunkSource& ref, const BtfDesc& d, const std::string& path, const Model& model) {
+  if (model.desc().abrdf_size() != d.abrdf_size() || model.desc().num_texels() != d.num_texels() || ref.rows() != d.abrdf_size() ||
+      ref.texels() != d.num_texels())
+    return invalid_argument(path + ": model shape differs from the reference BTF");
+  if (ref.chunk_count(0) % uint64_t(d.width) != 0) return invalid_argument(path + ": reference chunks are not whole texel rows");
   double se = 0, sr = 0, mx = 0, peak = 0;
-  std::vector<uint16_t> raw;
+  std::vector<uint8_t> raw;
   std::vector<float> a;
   Btf band;
   for (uint64_t c = 0; c < ref.num_chunks(); ++c) {
-    raw.resize(ref.chunk_bytes(c) / 2);
-    a.resize(raw.size());
-    BTFC_RETURN_IF_ERROR(ref.read_raw(c, raw.data()));
-    BTFC_RETURN_IF_ERROR(ref.decode(c, raw.data(), a.data()));
-    // BDI chunks are whole texel rows (formats.md 2.2).
+    raw.resize(ref.raw_buffer_bytes(c));
+    a.resize(ref.chunk_count(c) * ref.rows());
+    BTFC_RETURN_IF_ERROR(ref.load(c, raw.empty() ? nullptr : raw.data(), a.data()));
+    // Chunks are whole texel rows (BDI: formats.md 2.2; raw .btfc: open_raw_chunks).
     DecodeRequest req;
     req.y0 = int(ref.chunk_first(c) / uint64_t(d.width));
     req.height = int(ref.chunk_count(c) / uint64_t(d.width));

@@ -20,19 +20,12 @@
 #include "codecs/fmf/ooc_svd.h"
 #include "core/btf.h"
 #include "core/progress.h"
+#include "formats/raw_btfc.h"
 
 namespace btfc {
 
 // The shape of the BTF at `path` without reading its values (any input read_btf takes).
 Result<BtfDesc> probe_btf(const std::string& path);
-
-// A raw .btfc is texel-major already: the streamed SVD reads its data tensor in place, in
-// chunks of `lines_per_chunk` scan lines, with no working file. Chunks are mapped from the page
-// cache (no copy, no decode; two mapped at a time: 8 bytes per value), or read into buffers
-// (12 bytes per value) when the tensor is not float-aligned. The tensor CRC is checked over the
-// first in-order sweep, each chunk's values checked finite when first seen.
-bool is_raw_btfc_file(const std::string& path);
-Result<std::unique_ptr<fmf::ChunkSource>> open_raw_chunks(const std::string& path, uint32_t lines_per_chunk);
 
 struct WorkFile {
   std::string path;        // the BDI file to read
@@ -61,4 +54,6 @@ class BdiChunks;
 // RMSE, relative L2, PSNR (peak rule of core/metrics.h) and max |error| of `model` against the
 // BTF in `ref`, chunk by chunk; mean_ssim is NaN (SSIM needs whole images).
 Result<Metrics> compare_streamed(const BdiChunks& ref, const Model& model);
+// The same against any chunk source of whole texel rows (`path` names it in errors).
+Result<Metrics> compare_streamed(const fmf::ChunkSource& ref, const BtfDesc& desc, const std::string& path, const Model& model);
 }  // namespace btfc

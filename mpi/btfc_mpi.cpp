@@ -2,8 +2,11 @@
 //
 //   btfc-mpi compress INPUT -c SPEC -o OUT [--max-memory SIZE] [--work-file PATH] [--seed N] [--json] [-q]
 //
-// Rank 0 prepares the working file (formats/btf_stream.h; an uncompressed Bonn BDI input is
-// used as it is), every rank opens it and reads only its own texel chunks, each pass of the
+// A raw .btfc input (without --work-file) is read in place: every rank maps only its own texel
+// chunks and the tensor CRC is joined over the ranks after the first pass, so no rank reads the
+// whole input. Otherwise rank 0 prepares the working file (formats/btf_stream.h; an
+// uncompressed Bonn BDI input is used as it is), every rank opens it and reads only its own
+// texel chunks. Each pass of the
 // streamed SVD is local GEMMs plus one MPI_Allreduce (codecs/fmf/ooc_svd.h, mpi_collective.h),
 // and rank 0 writes the model. The model equals `btfc compress` of the same input up to float
 // rounding (tests/mpi_test.sh). Every failure is agreed on by all ranks (MpiCollective::agree),
@@ -18,6 +21,8 @@
 #include <cstdlib>
 #include <filesystem>
 #include <iostream>
+#include <memory>
+#include <optional>
 #include <nlohmann/json.hpp>
 #include <string>
 
@@ -119,11 +124,29 @@ int run(int argc, char** argv, MpiCollective& coll) {
   if (std::string(resolved->first->name()) != "fmf")
     return finish(invalid_argument("btfc-mpi compresses with fmf only (got " + std::string(resolved->first->name()) + ")"));
 
-  // Rank 0 prepares the working file; the others wait for the agreed outcome.
+  // Raw .btfc: in place on every rank, when float chunks fit the limit (as in btfc compress;
+  // otherwise the half working file, whose chunks are smaller) and every rank sees the file
+  // (the decision is summed over ranks, so all take the same branch). Otherwise rank 0 prepares
+  // the working file; the others wait for the agreed outcome.
   BtfDesc desc;
+  uint32_t raw_lines = 0;
+  if (a.work_file.empty() && is_raw_btfc_file(a.in)) {
+    auto d = probe_btf(a.in);
+    // Sized for 12 bytes per value, as btfc compress does (mapped chunks take 8).
+    // A spec that cannot stream (plan error) takes the working-file branch, where rank 0 reports it.
+    if (d.ok()) {
+      desc = d.value();
+      auto plan = plan_streamed_fmf(params, desc, *limit);
+      if (plan.ok()) raw_lines = stream_lines_per_chunk(desc, plan.value(), *limit / 12 * 10);
+    }
+  }
+  double votes = raw_lines > 0 ? 1.0 : 0.0;
+  s = coll.allreduce_sum(&votes, 1);
+  if (!s.ok()) return finish(s);
+  const bool in_place = votes == double(coll.size());
   WorkFile wf;
   std::string temp;
-  if (root) {
+  if (root && !in_place) {
     s = [&]() -> Status {
       BTFC_ASSIGN_OR_RETURN(desc, probe_btf(a.in));
       BTFC_ASSIGN_OR_RETURN(StreamPlan plan, plan_streamed_fmf(params, desc, *limit));
@@ -150,11 +173,23 @@ int run(int argc, char** argv, MpiCollective& coll) {
   } cleanup{temp};
   s = coll.agree(s);
   if (!s.ok()) return finish(s);
-  const std::string work_path = bcast(wf.path);
-  auto file = BdiChunks::open(work_path);
-  s = coll.agree(file.ok() ? Status{} : file.status());
-  if (!s.ok()) return finish(s);
-  if (!root) desc = file->desc();
+  std::unique_ptr<fmf::ChunkSource> src;
+  std::optional<BdiChunks> file;
+  if (in_place) {
+    auto opened = open_raw_chunks(a.in, raw_lines);
+    s = coll.agree(opened.ok() ? Status{} : opened.status());
+    if (!s.ok()) return finish(s);
+    src = std::move(opened.value());
+    wf.path = a.in;
+  } else {
+    const std::string work_path = bcast(wf.path);
+    auto opened = BdiChunks::open(work_path);
+    s = coll.agree(opened.ok() ? Status{} : opened.status());
+    if (!s.ok()) return finish(s);
+    file.emplace(std::move(opened.value()));
+    if (!root) desc = file->desc();
+    src = std::make_unique<BdiChunkSource>(*file);
+  }
 
   Progress progress(a.quiet || a.json || !root);
   Context ctx;
@@ -162,7 +197,7 @@ int run(int argc, char** argv, MpiCollective& coll) {
   ctx.progress = &progress;
   ctx.max_bytes = *limit;
   const auto t0 = std::chrono::steady_clock::now();
-  auto enc = encode_fmf_streamed(file.value(), desc, params, ctx, coll);
+  auto enc = encode_fmf_streamed(*src, desc, params, ctx, coll);
   s = coll.agree(enc.ok() ? Status{} : enc.status());  // streaming_svd's failures are already agreed
   if (!s.ok()) return finish(s);
   const double factor_s = since(t0);
@@ -185,7 +220,7 @@ int run(int argc, char** argv, MpiCollective& coll) {
       ranks.push_back({{"rank", r}, {"bytes_read", all[4 * r]}, {"pass_seconds", all[4 * r + 1]}, {"reduce_seconds", all[4 * r + 2]},
                        {"peak_rss_bytes", all[4 * r + 3]}});
     json j{{"input", a.in}, {"output", a.out}, {"spec", enc->model->spec()}, {"ranks", coll.size()}, {"work_file", wf.path},
-           {"work_file_built", wf.built}, {"work_file_seconds", wf.seconds}, {"passes", enc->stats.passes},
+           {"in_place", in_place}, {"work_file_built", wf.built}, {"work_file_seconds", wf.seconds}, {"passes", enc->stats.passes},
            {"pass_seconds_rank0", enc->stats.pass_seconds}, {"allreduce_bytes_per_rank", enc->stats.reduce_bytes},
            {"factorize_seconds", factor_s}, {"total_seconds", since(t_start)}, {"per_rank", ranks}};
     if (a.json) std::cout << j.dump(2) << "\n";

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # btfc-mpi across 1, 2 and 3 ranks (oversubscribed on this 2-core machine) gives the model of a
-# single `btfc compress` of the same working file, up to float rounding; a rank that cannot
+# single `btfc compress` of the same working file (or raw .btfc read in place), up to float
+# rounding; a corrupt raw tensor fails on every rank; a rank that cannot
 # read its chunk makes every rank exit with the same clear error, no hang.
 # Usage: BTFC=... BTFC_MPI=... MPIRUN=... mpi_test.sh WORKDIR
 set -uo pipefail
@@ -59,6 +60,36 @@ print("ok   dfmf-same-model-n2 rel_l2 %.3g" % m["rel_l2"])
 PY
 check compare-to-source 0 "$BTFC" --json compare --no-ssim "$W/s.btfc" "$W/mpi3.btfc"
 python3 -c "import json; m=json.load(open('$W/out.txt')); assert 1e-3 < m['rel_l2'] < 0.6, m; print('ok   mpi-model-error', m['rel_l2'])" || fails=$((fails + 1))
+cp "$W/out.txt" "$W/err_work.json"
+
+# A raw .btfc is read in place: each rank maps only its own chunks, no working file; the model
+# equals one rank's in-place model (same float data, so up to summation order), and the working
+# file's model up to its half rounding.
+for n in 1 2 3; do
+  check "raw-mpirun-n$n" 0 $MPI -n $n "$BTFC_MPI" compress "$W/s.btfc" -c $SPEC -o "$W/raw$n.btfc" --max-memory 60M --json
+  cp "$W/out.txt" "$W/raw$n.json"
+  check "raw-compare-n$n" 0 "$BTFC" --json compare --no-ssim "$W/$([ $n = 1 ] && echo s || echo raw1).btfc" "$W/raw$n.btfc"
+  python3 - "$W/out.txt" "$W/raw$n.json" $n "$W/err_work.json" <<'PY' || fails=$((fails + 1))
+import json, sys
+m = json.load(open(sys.argv[1])); r = json.load(open(sys.argv[2])); n = int(sys.argv[3])
+assert r["in_place"] and not r["work_file_built"] and r["ranks"] == n, r
+total = 24 * 22 * 19683 * 4 * 5   # 5 passes over the float tensor, split over the ranks
+assert sum(p["bytes_read"] for p in r["per_rank"]) == total and (n == 1 or all(p["bytes_read"] < total for p in r["per_rank"])), r
+if n == 1:  # against the source: the working file's model error, up to its half rounding
+    w = json.load(open(sys.argv[4]))["rel_l2"]
+    assert abs(m["rel_l2"] - w) / w < 0.01, (m["rel_l2"], w)
+    print("ok   raw-error-n1 %.6f vs working file %.6f" % (m["rel_l2"], w))
+else:       # against the 1-rank in-place model
+    assert m["rel_l2"] < 2e-3, m
+    print("ok   raw-same-model-n%d rel_l2 %.3g" % (n, m["rel_l2"]))
+PY
+done
+# A changed value in the middle of the tensor (rank 1's chunks at -n 3): the joined CRC fails on every rank.
+cp "$W/s.btfc" "$W/flip.btfc"
+python3 -c "import os,sys; p=sys.argv[1]; n=os.path.getsize(p); f=open(p,'r+b'); f.seek(n//2); b=f.read(1); f.seek(n//2); f.write(bytes([b[0]^16]))" "$W/flip.btfc"
+check raw-crc-n3 2 $MPI -n 3 "$BTFC_MPI" compress "$W/flip.btfc" -c $SPEC -o "$W/flip.fmf.btfc" --max-memory 60M
+grep -q "flip.btfc: chunk TNSR 'data': CRC mismatch" "$W/err.txt" && echo "ok   raw-crc-message" || { echo "FAIL raw-crc-message"; cat "$W/err.txt"; fails=$((fails + 1)); }
+[ -e "$W/flip.fmf.btfc" ] && { echo "FAIL raw-crc-partial-output"; fails=$((fails + 1)); }
 
 # A NaN in the last chunk (read by the last rank only): all ranks stop with its message.
 cp "$W/w.btf" "$W/bad.btf"

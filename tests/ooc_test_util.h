@@ -5,15 +5,14 @@
 #include <unistd.h>
 
 #include <Eigen/Dense>
-#include <barrier>
 #include <cmath>
 #include <cstring>
-#include <mutex>
 
 #include "codecs/codec.h"
 #include "codecs/fmf/ooc_svd.h"
 #include "core/synth.h"
 #include "formats/bonn/bdi_work.h"
+#include "tests/thread_group.h"
 
 namespace btfc::ooc_test {
 
@@ -66,59 +65,8 @@ class MemorySource final : public fmf::ChunkSource {
   size_t m_per;
 };
 
-// P "processes" as threads: sums through shared buffers and a barrier, like MPI_Allreduce.
-class ThreadGroup {
- public:
-  explicit ThreadGroup(int p) : m_p(p), m_bar(p) {}
-  class Member final : public fmf::Collective {
-   public:
-    Member(ThreadGroup& g, int r) : m_g(g), m_r(r) {}
-    int rank() const override { return m_r; }
-    int size() const override { return m_g.m_p; }
-    Status allreduce_sum(double* d, size_t n) override {
-      m_g.m_bar.arrive_and_wait();
-      if (m_r == 0) m_g.m_sum.assign(n, 0.0);
-      m_g.m_bar.arrive_and_wait();
-      {
-        std::lock_guard<std::mutex> lock(m_g.m_mu);
-        for (size_t i = 0; i < n; ++i) m_g.m_sum[i] += d[i];
-      }
-      m_g.m_bar.arrive_and_wait();
-      std::copy(m_g.m_sum.begin(), m_g.m_sum.end(), d);
-      m_g.m_bar.arrive_and_wait();
-      return {};
-    }
-    Status reduce_sum_to_root(float* d, size_t n) override {
-      std::vector<double> x(d, d + n);
-      BTFC_RETURN_IF_ERROR(allreduce_sum(x.data(), n));
-      if (m_r == 0) std::copy(x.begin(), x.end(), d);
-      return {};
-    }
-    Status agree(const Status& local) override {
-      m_g.m_bar.arrive_and_wait();
-      if (!local.ok()) {
-        std::lock_guard<std::mutex> lock(m_g.m_mu);
-        if (m_r < m_g.m_first) m_g.m_first = m_r, m_g.m_err = local;
-      }
-      m_g.m_bar.arrive_and_wait();
-      Status s = m_g.m_first == INT32_MAX ? Status{} : Status(m_g.m_err.code(), "rank " + std::to_string(m_g.m_first) + ": " + m_g.m_err.message());
-      m_g.m_bar.arrive_and_wait();
-      return s;
-    }
-
-   private:
-    ThreadGroup& m_g;
-    int m_r;
-  };
-
- private:
-  int m_p;
-  std::barrier<> m_bar;
-  std::mutex m_mu;
-  std::vector<double> m_sum;
-  int m_first = INT32_MAX;
-  Status m_err;
-};
+// P "processes" as threads (tests/thread_group.h).
+using test::ThreadGroup;
 
 // ||B - U SxV^T||_F / ||B||_F.
 inline double actual_error(const Btf& b, const fmf::SvdResult& r) {

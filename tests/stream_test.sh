@@ -73,6 +73,9 @@ python3 -c "import os,sys; p=sys.argv[1]; n=os.path.getsize(p); f=open(p,'r+b');
 check ooc-raw-crc 2 "$BTFC" compress "$W/flip.btfc" -c $SPEC -o "$W/flip.fmf.btfc" --max-memory 80M
 expect_grep ooc-raw-crc-msg "CRC mismatch" "$W/err.txt"
 [ ! -e "$W/flip.fmf.btfc" ] && echo "ok   ooc-raw-crc-no-output" || { echo "FAIL ooc-raw-crc-no-output"; fails=$((fails + 1)); }
+# The same for color=dfmf (the channel sources hand the first-pass CRC check to the raw source).
+check ooc-raw-crc-dfmf 2 "$BTFC" compress "$W/flip.btfc" -c fmf:color=dfmf:rank=8:oversample=8:power_iters=1 -o "$W/flip.fmf.btfc" --max-memory 80M
+expect_grep ooc-raw-crc-dfmf-msg "CRC mismatch" "$W/err.txt"
 
 # A kept working file is a Bonn BDI btfc reads as a BTF; the second run reuses it.
 check keep 0 "$BTFC" --json compress "$W/s.btfc" -c $SPEC -o "$W/k.btfc" --work-file "$W/work.btf" --max-memory 40M
@@ -173,8 +176,20 @@ check cmp-bdi 0 "$BTFC" --json compare --no-ssim "$W/ooc.btfc" "$W/d.btf"
 python3 -c "import json; m=json.load(open('$W/out.txt')); assert m['rel_l2'] < 2e-3, m; print('ok   bdi-decoded', m['rel_l2'])" || fails=$((fails + 1))
 check decompress-too-big 1 "$BTFC" decompress "$W/ooc.btfc" -o "$W/d2.btfc" --max-memory 8M
 expect_grep decompress-msg "decompress to a Bonn BDI" "$W/err.txt"
+# A given --max-memory is also the in-core limit: a region decode beyond it is refused, one within it runs.
+check decompress-region-limit 1 "$BTFC" decompress "$W/ooc.btfc" -o "$W/r.btfc" --region 0,0,40,40 --max-memory 8M
+expect_grep decompress-region-msg "over the memory limit of 8388608 bytes" "$W/err.txt"
+check decompress-region-fits 0 "$BTFC" -q decompress "$W/ooc.btfc" -o "$W/r.btfc" --region 0,0,8,8 --max-memory 8M
 check bench-ooc 0 "$BTFC" --json bench "$W/s.btfc" -c $SPEC --max-memory 40M
 python3 -c "import json; r=json.load(open('$W/out.txt'))[0]; assert 1e-3 < r['rel_l2'] < 0.5 and r['out_of_core']['passes'] == 4, r; print('ok   bench-ooc', r['rel_l2'])" || fails=$((fails + 1))
+cp "$W/out.txt" "$W/bench_ooc.json"
+# With room for float chunks the raw .btfc is streamed in place, and bench compares against it.
+check bench-ooc-raw 0 "$BTFC" --json bench "$W/s.btfc" -c $SPEC --max-memory 80M
+python3 -c "
+import json; r=json.load(open('$W/out.txt'))[0]; w=json.load(open('$W/bench_ooc.json'))[0]
+assert 'in place' in r['out_of_core']['work_file_note'], r
+assert abs(r['rel_l2'] - w['rel_l2']) / w['rel_l2'] < 0.01, (r['rel_l2'], w['rel_l2'])
+print('ok   bench-ooc-raw', r['rel_l2'])" || fails=$((fails + 1))
 
 rm -rf "$W"
 [ "$fails" -eq 0 ] && echo "all stream checks passed" || echo "$fails stream checks FAILED"

@@ -36,6 +36,9 @@ class DfmfChannelSource final : public fmf::ChunkSource {
   Status decode(size_t c, const void* raw, float* dst) const override;
   Status load(size_t c, void* raw, float* dst) const override;
   size_t raw_buffer_bytes(size_t c) const override;
+  // The base's whole-file check (a raw .btfc's CRC), after the first pass of every channel's SVD
+  // (the base's check is idempotent: the same answer each time).
+  Status finish_first_pass(fmf::Collective& coll) const override { return m_base.finish_first_pass(coll); }
 
   // Luminance values clamped to 0 over the chunks loaded so far, each chunk counted once however
   // often it was loaded (channel 0 only counts; the other channels clamp the same values).

@@ -65,6 +65,7 @@ Result<SvdResult> streaming_exact_svd(const ChunkSource& src, const std::vector<
     energy = buf[tri];
     std::vector<double>().swap(buf);  // before the solver: keeps the peak at 3 m^2 doubles
   }
+  BTFC_RETURN_IF_ERROR(src.finish_first_pass(coll));  // e.g. a raw .btfc's CRC, joined over processes
 
   Eigen::VectorXd lambda;
   MatrixXd E;

@@ -77,6 +77,7 @@ Result<SvdResult> streaming_svd(const ChunkSource& src, const std::vector<size_t
     Y = Eigen::Map<MatrixXd>(buf.data(), Index(m), l);
     energy = buf[m * size_t(l)];
   }
+  BTFC_RETURN_IF_ERROR(src.finish_first_pass(coll));
   // Passes 1..q: Y = B B^T Q.
   MatrixXf Q = orthonormalize(Y);
   for (int it = 0; it < opt.power_iters; ++it) {

@@ -31,8 +31,8 @@
 // float rounding.
 //
 // Memory: one raw chunk buffer and two float chunks (a helper thread reads and decodes the next
-// chunk while the current one is multiplied), or two mapped chunks for a mappable source,
-// + O((m + n_local) l) for Y, Q and W^T (randomized) or streaming_exact_bytes(m) (exact). The
+// chunk while the current one is multiplied), or two mapped chunks for a mappable source, plus
+// O((m + n_local) l) for Y, Q and W^T (randomized) or streaming_exact_bytes(m) (exact). The
 // caller sizes chunks so this stays under its limit (ooc_fmf.h).
 #pragma once
 #include <cstdint>
@@ -43,6 +43,8 @@
 #include "core/status.h"
 
 namespace btfc::fmf {
+
+class Collective;
 
 // Column chunks of B. read() does the I/O (called from a helper thread, may run concurrently
 // with decode() of another chunk); decode() turns raw bytes into a column-major float block
@@ -71,6 +73,10 @@ class ChunkSource {
   virtual bool mappable() const { return false; }
   virtual Result<const float*> map(size_t c) const { return unsupported("this chunk source cannot map chunks"); }
   virtual void unmap(size_t c, const float* p) const {}
+  // Called by every process once the first pass has seen every chunk (each by its owner): a
+  // source whose integrity check spans the whole file (a raw .btfc's tensor CRC) combines the
+  // processes' parts here through `coll`, and every process returns the same status.
+  virtual Status finish_first_pass(Collective& coll) const { return {}; }
   size_t texels() const { return num_chunks() ? chunk_first(num_chunks() - 1) + chunk_count(num_chunks() - 1) : 0; }
 };
 

@@ -1,6 +1,7 @@
 // A raw .btfc streamed in place (formats/btf_stream.h open_raw_chunks): mapped chunks hold the
 // file's values, the mapped factorization equals the copying one bit for bit, and a NaN or a
-// flipped bit in the file is an error naming it, whichever way the chunks are fetched.
+// flipped bit in the file is an error naming it, whichever way the chunks are fetched, and
+// also when processes each map only their own chunks (the CRC parts joined after pass 0).
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -9,11 +10,13 @@
 #include <fstream>
 #include <iterator>
 #include <limits>
+#include <thread>
 
 #include "codecs/fmf/ooc_svd.h"
 #include "core/synth.h"
 #include "formats/btf_io.h"
 #include "formats/btf_stream.h"
+#include "tests/thread_group.h"
 
 using namespace btfc;
 
@@ -40,6 +43,7 @@ class Copying final : public fmf::ChunkSource {
   size_t raw_bytes(size_t c) const override { return m_s.raw_bytes(c); }
   Status read(size_t c, void* raw) const override { return m_s.read(c, raw); }
   Status decode(size_t c, const void* raw, float* dst) const override { return m_s.decode(c, raw, dst); }
+  Status finish_first_pass(fmf::Collective& coll) const override { return m_s.finish_first_pass(coll); }
 
  private:
   const fmf::ChunkSource& m_s;
@@ -118,4 +122,42 @@ TEST(RawChunks, NaNAndFlippedBitAreErrorsWhetherMappedOrCopied) {
     }
     std::remove(path.c_str());
   }
+}
+
+// Three processes (threads), each mapping only its own chunks of its own open file, as btfc-mpi
+// ranks do: the same factorization as one process, and a changed value anywhere (here in the
+// middle process's range) is a CRC mismatch on every process.
+TEST(RawChunks, ProcessesMappingTheirOwnChunksJoinTheCrc) {
+  Btf b = synth(10, 7);
+  const float marker = 0.987654321f;
+  b.abrdf(3 * 10 + 4)[7] = marker;  // texel (4, 3): chunk 1 of 4, owned by the middle process
+  const std::string path = tmp_path("mpi.btfc");
+  ASSERT_TRUE(write_btf(b, path).ok());
+  auto run = [&](int P, std::vector<Result<fmf::SvdResult>>& out) {
+    test::ThreadGroup group(P);
+    std::vector<std::thread> threads;
+    for (int r = 0; r < P; ++r)
+      threads.emplace_back([&, r] {
+        test::ThreadGroup::Member me(group, r);
+        auto src = open_raw_chunks(path, 2);
+        if (!src.ok()) return void(out[size_t(r)] = src.status());
+        out[size_t(r)] = fmf::streaming_svd(*src.value(), fmf::owned_chunks(*src.value(), r, P), options(), me);
+      });
+    for (auto& t : threads) t.join();
+  };
+  std::vector<Result<fmf::SvdResult>> one(1, invalid_argument("not run")), three(3, invalid_argument("not run"));
+  run(1, one);
+  run(3, three);
+  ASSERT_TRUE(one[0].ok()) << one[0].status().message();
+  for (auto& r : three) ASSERT_TRUE(r.ok()) << r.status().message();
+  EXPECT_LT((three[0]->U - one[0]->U).norm(), 1e-5f * one[0]->U.norm());
+  EXPECT_LT((three[0]->SxV - one[0]->SxV).norm(), 1e-4f * one[0]->SxV.norm());
+
+  patch_float(path, marker, 0.25f);
+  run(3, three);
+  for (auto& r : three) {
+    ASSERT_FALSE(r.ok());
+    EXPECT_NE(r.status().message().find("CRC mismatch"), std::string::npos) << r.status().message();
+  }
+  std::remove(path.c_str());
 }
