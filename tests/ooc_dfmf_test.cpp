@@ -35,17 +35,12 @@ Btf noisy(int w, int h) {
 
 // encode_fmf_streamed over `p` thread-simulated processes; returns process 0's result.
 Result<StreamedEncode> encode_on(int p, const fmf::ChunkSource& src, const Btf& b, const Params& params) {
-  ThreadGroup group(p);
   std::vector<Result<StreamedEncode>> res;
   for (int r = 0; r < p; ++r) res.emplace_back(Status{});
-  std::vector<std::thread> th;
-  for (int r = 0; r < p; ++r)
-    th.emplace_back([&, r] {
-      ThreadGroup::Member me(group, r);
-      Context ctx;
-      res[size_t(r)] = encode_fmf_streamed(src, b.desc(), params, ctx, me);
-    });
-  for (auto& t : th) t.join();
+  run_group(p, [&](fmf::Collective& me, int r) {
+    Context ctx;
+    res[size_t(r)] = encode_fmf_streamed(src, b.desc(), params, ctx, me);
+  });
   for (int r = 1; r < p; ++r) {
     if (!res[size_t(r)].ok()) return res[size_t(r)].status();
     EXPECT_FALSE(res[size_t(r)]->model) << "only process 0 builds the model";
@@ -173,15 +168,8 @@ TEST(StreamingExact, ThreeProcessesGiveTheOneProcessResultAndAgreeOnFailures) {
   ASSERT_TRUE(ref.ok());
   for (bool fail : {false, true}) {
     src.fail_chunk = fail ? 7 : size_t(-1);  // chunk 7 belongs to process 2
-    ThreadGroup group(3);
     std::vector<Result<fmf::SvdResult>> res(3, Result<fmf::SvdResult>(Status{}));
-    std::vector<std::thread> th;
-    for (int r = 0; r < 3; ++r)
-      th.emplace_back([&, r] {
-        ThreadGroup::Member me(group, r);
-        res[size_t(r)] = fmf::streaming_exact_svd(src, fmf::owned_chunks(src, r, 3), opt, me);
-      });
-    for (auto& t : th) t.join();  // a hang here would time the test out
+    run_group(3, [&](fmf::Collective& me, int r) { res[size_t(r)] = fmf::streaming_exact_svd(src, fmf::owned_chunks(src, r, 3), opt, me); });
     if (fail) {
       for (int r = 0; r < 3; ++r)
         EXPECT_NE(res[size_t(r)].status().message().find("rank 2: cannot read chunk 7"), std::string::npos) << res[size_t(r)].status().message();

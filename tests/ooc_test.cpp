@@ -139,15 +139,8 @@ TEST(StreamingSvd, ThreeProcessesGiveTheOneProcessResult) {
   fmf::Collective one;
   auto ref = fmf::streaming_svd(src, fmf::owned_chunks(src, 0, 1), opt, one);
   ASSERT_TRUE(ref.ok());
-  ThreadGroup group(3);
   std::vector<Result<fmf::SvdResult>> res(3, Result<fmf::SvdResult>(Status{}));
-  std::vector<std::thread> th;
-  for (int r = 0; r < 3; ++r)
-    th.emplace_back([&, r] {
-      ThreadGroup::Member me(group, r);
-      res[size_t(r)] = fmf::streaming_svd(src, fmf::owned_chunks(src, r, 3), opt, me);
-    });
-  for (auto& t : th) t.join();
+  run_group(3, [&](fmf::Collective& me, int r) { res[size_t(r)] = fmf::streaming_svd(src, fmf::owned_chunks(src, r, 3), opt, me); });
   for (int r = 0; r < 3; ++r) ASSERT_TRUE(res[size_t(r)].ok()) << res[size_t(r)].status().message();
   const auto& got = res[0].value();
   ASSERT_EQ(got.SxV.rows(), ref->SxV.rows());
@@ -165,15 +158,8 @@ TEST(StreamingSvd, AFailingProcessStopsEveryProcessWithItsMessage) {
   src.fail_chunk = 7;  // owned by process 2 of 3
   fmf::SvdOptions opt;
   opt.max_rank = 8, opt.oversample = 6, opt.power_iters = 1;
-  ThreadGroup group(3);
   std::vector<Status> st(3);
-  std::vector<std::thread> th;
-  for (int r = 0; r < 3; ++r)
-    th.emplace_back([&, r] {
-      ThreadGroup::Member me(group, r);
-      st[size_t(r)] = fmf::streaming_svd(src, fmf::owned_chunks(src, r, 3), opt, me).status();
-    });
-  for (auto& t : th) t.join();  // a hang here would time the test out
+  run_group(3, [&](fmf::Collective& me, int r) { st[size_t(r)] = fmf::streaming_svd(src, fmf::owned_chunks(src, r, 3), opt, me).status(); });
   for (int r = 0; r < 3; ++r) {
     EXPECT_EQ(st[size_t(r)].code(), StatusCode::io_error) << r;
     EXPECT_NE(st[size_t(r)].message().find("rank 2: cannot read chunk 7"), std::string::npos) << st[size_t(r)].message();

@@ -66,7 +66,7 @@ class MemorySource final : public fmf::ChunkSource {
 };
 
 // P "processes" as threads (tests/thread_group.h).
-using test::ThreadGroup;
+using test::run_group;
 
 // ||B - U SxV^T||_F / ||B||_F.
 inline double actual_error(const Btf& b, const fmf::SvdResult& r) {

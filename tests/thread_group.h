@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "codecs/fmf/ooc_svd.h"
@@ -65,5 +66,19 @@ class ThreadGroup {
   int m_first = INT32_MAX;
   Status m_err;
 };
+
+// Runs fn(member, rank) for ranks 0..P-1, each on its own thread with its own Member, and
+// returns when all have finished (a hang would time the test out).
+template <class F>
+void run_group(int P, F&& fn) {
+  ThreadGroup group(P);
+  std::vector<std::thread> th;
+  for (int r = 0; r < P; ++r)
+    th.emplace_back([&, r] {
+      ThreadGroup::Member me(group, r);
+      fn(me, r);
+    });
+  for (auto& t : th) t.join();
+}
 
 }  // namespace btfc::test

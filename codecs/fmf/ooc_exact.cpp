@@ -91,10 +91,7 @@ Result<SvdResult> streaming_exact_svd(const ChunkSource& src, const std::vector<
   };
   BTFC_RETURN_IF_ERROR(run.pass(0, project, [](double*) {}));
   run.release();
-  BTFC_RETURN_IF_ERROR(run.reduce_to_root(sxv.data(), size_t(sxv.size())));
-  if (coll.rank() == 0) r.SxV = std::move(sxv);
-  run.finish_progress();
-  if (stats_out) *stats_out = run.take_stats();
+  BTFC_RETURN_IF_ERROR(run.finish(r, sxv, stats_out));
   return r;
 }
 

@@ -33,14 +33,12 @@ class PassRunner {
               const std::function<void(double* sums)>& pack);
   std::vector<double>& sums() { return m_buf; }
 
-  // Collective::reduce_sum_to_root, timed and counted in the stats.
-  Status reduce_to_root(float* data, size_t n);
   // Frees the chunk buffers and the sum buffer (call after the last pass).
   void release();
-  void finish_progress() {
-    if (m_progress) m_progress->finish();
-  }
-  StreamStats take_stats() { return std::move(m_st); }
+  // The end of every streamed SVD: the owned rows of SxV (n x C, zero elsewhere) summed into
+  // process 0 (disjoint rows: exact; timed and counted in the stats) and moved into r.SxV there,
+  // the progress finished, the stats handed to stats_out (may be null).
+  Status finish(SvdResult& r, MatrixXfR& sxv, StreamStats* stats_out);
 
  private:
   struct Buffers {

@@ -124,10 +124,7 @@ Result<SvdResult> streaming_svd(const ChunkSource& src, const std::vector<size_t
   const MatrixXf Ekf = Ek.cast<float>();
   for (auto& [c, W] : wt) sxv.middleRows(Index(src.chunk_first(c)), W.rows()) = W * Ekf;
   wt.clear();
-  BTFC_RETURN_IF_ERROR(run.reduce_to_root(sxv.data(), size_t(sxv.size())));
-  if (coll.rank() == 0) r.SxV = std::move(sxv);
-  run.finish_progress();
-  if (stats_out) *stats_out = run.take_stats();
+  BTFC_RETURN_IF_ERROR(run.finish(r, sxv, stats_out));
   return r;
 }
 

@@ -134,16 +134,11 @@ TEST(RawChunks, ProcessesMappingTheirOwnChunksJoinTheCrc) {
   const std::string path = tmp_path("mpi.btfc");
   ASSERT_TRUE(write_btf(b, path).ok());
   auto run = [&](int P, std::vector<Result<fmf::SvdResult>>& out) {
-    test::ThreadGroup group(P);
-    std::vector<std::thread> threads;
-    for (int r = 0; r < P; ++r)
-      threads.emplace_back([&, r] {
-        test::ThreadGroup::Member me(group, r);
-        auto src = open_raw_chunks(path, 2);
-        if (!src.ok()) return void(out[size_t(r)] = src.status());
-        out[size_t(r)] = fmf::streaming_svd(*src.value(), fmf::owned_chunks(*src.value(), r, P), options(), me);
-      });
-    for (auto& t : threads) t.join();
+    test::run_group(P, [&](fmf::Collective& me, int r) {
+      auto src = open_raw_chunks(path, 2);
+      if (!src.ok()) return void(out[size_t(r)] = src.status());
+      out[size_t(r)] = fmf::streaming_svd(*src.value(), fmf::owned_chunks(*src.value(), r, P), options(), me);
+    });
   };
   std::vector<Result<fmf::SvdResult>> one(1, invalid_argument("not run")), three(3, invalid_argument("not run"));
   run(1, one);
