@@ -67,17 +67,10 @@ Result<SvdResult> streaming_exact_svd(const ChunkSource& src, const std::vector<
   }
   BTFC_RETURN_IF_ERROR(src.finish_first_pass(coll));  // e.g. a raw .btfc's CRC, joined over processes
 
-  Eigen::VectorXd lambda;
   MatrixXd E;
-  top_eigenpairs(G, M, lambda, E);
+  SvdResult r = spectrum_of(G, M, energy, opt, "exact (streamed)", E);
   G.resize(0, 0);
-  SvdResult r;
-  r.method = "exact (streamed)";
-  r.requested_rank = opt.max_rank;
-  r.total_energy = energy;
-  const int rank = choose_rank(lambda, energy, opt, r.data_rank_limit, r.target_reached);
-  r.S = lambda.head(rank).cwiseSqrt();
-  r.kept_energy = lambda.head(rank).sum();
+  const Index rank = r.S.size();
   r.U = E.leftCols(rank).cast<float>();
   E.resize(0, 0);
 

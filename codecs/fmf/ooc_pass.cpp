@@ -105,4 +105,17 @@ void PassRunner::release() {
   std::vector<double>().swap(m_buf);
 }
 
+SvdResult spectrum_of(const Eigen::MatrixXd& G, Eigen::Index l, double energy, const SvdOptions& opt, const char* method, Eigen::MatrixXd& E) {
+  Eigen::VectorXd lambda;
+  top_eigenpairs(G, l, lambda, E);
+  SvdResult r;
+  r.method = method;
+  r.requested_rank = opt.max_rank;
+  r.total_energy = energy;
+  const int rank = choose_rank(lambda, energy, opt, r.data_rank_limit, r.target_reached);
+  r.S = lambda.head(rank).cwiseSqrt();
+  r.kept_energy = lambda.head(rank).sum();
+  return r;
+}
+
 }  // namespace btfc::fmf

@@ -8,6 +8,7 @@
 // Collective::agree(local), i.e. all of them the lowest failing process's message. Once failed,
 // a runner skips the chunks of later passes (it returns at the first failed pass anyway).
 #pragma once
+#include <Eigen/Dense>
 #include <chrono>
 #include <functional>
 #include <string>
@@ -56,5 +57,11 @@ class PassRunner {
   Status m_local;
   std::vector<double> m_buf;
 };
+
+// The small eigenproblem every streamed SVD ends with: the top l eigenpairs of the (l x l or
+// rows x rows) Gram matrix G, the rank choice (choose_rank: max_rank, target_error, the data's
+// rank), S and the energies, in an SvdResult named `method`; E gets the eigenvectors, largest
+// first, from which the caller makes U. The rank is r.S.size().
+SvdResult spectrum_of(const Eigen::MatrixXd& G, Eigen::Index l, double energy, const SvdOptions& opt, const char* method, Eigen::MatrixXd& E);
 
 }  // namespace btfc::fmf

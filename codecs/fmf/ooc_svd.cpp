@@ -107,16 +107,9 @@ Result<SvdResult> streaming_svd(const ChunkSource& src, const std::vector<size_t
   G = Eigen::Map<MatrixXd>(buf.data(), l, l);
   run.release();
 
-  Eigen::VectorXd lambda;
   MatrixXd E;
-  top_eigenpairs(G, l, lambda, E);
-  SvdResult r;
-  r.method = "randomized (streamed)";
-  r.requested_rank = opt.max_rank;
-  r.total_energy = energy;
-  const int rank = choose_rank(lambda, energy, opt, r.data_rank_limit, r.target_reached);
-  r.S = lambda.head(rank).cwiseSqrt();
-  r.kept_energy = lambda.head(rank).sum();
+  SvdResult r = spectrum_of(G, l, energy, opt, "randomized (streamed)", E);
+  const Index rank = r.S.size();
   const MatrixXd Ek = E.leftCols(rank);
   r.U = (Q.cast<double>() * Ek).cast<float>();
   // SxV rows of the owned texels, summed (disjoint rows: exact) into process 0.
