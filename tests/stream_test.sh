@@ -100,25 +100,33 @@ check too-small 1 "$BTFC" compress "$W/s.btfc" -c $SPEC -o "$W/x.btfc" --max-mem
 check bad-size 1 "$BTFC" compress "$W/s.btfc" -c $SPEC -o "$W/x.btfc" --max-memory 12Q
 [ -e "$W/x.btfc" ] && { echo "FAIL partial-output"; fails=$((fails + 1)); }
 
+# in_and_out_of_core TAG INPUT SPEC LIMIT: compresses in core and with --max-memory LIMIT and
+# compares both with the input: leaves $W/TAG.ooc.json (the streamed run's report),
+# $W/TAG.cmp_in.json (in core vs input) and out.txt (out of core vs input).
+in_and_out_of_core() {
+  local tag=$1 in=$2 spec=$3 limit=$4
+  check "$tag-in-core" 0 "$BTFC" -q compress "$in" -c "$spec" -o "$W/$tag.in.btfc"
+  check "$tag-ooc" 0 "$BTFC" --json compress "$in" -c "$spec" -o "$W/$tag.ooc.btfc" --max-memory "$limit"
+  cp "$W/out.txt" "$W/$tag.ooc.json"
+  check "$tag-cmp-in" 0 "$BTFC" --json compare --no-ssim "$in" "$W/$tag.in.btfc"
+  cp "$W/out.txt" "$W/$tag.cmp_in.json"
+  check "$tag-cmp-ooc" 0 "$BTFC" --json compare --no-ssim "$in" "$W/$tag.ooc.btfc"
+}
+
 # color=dfmf streams too: three channel factorizations (3 x 4 passes) over the same working file,
 # the error of the in-core dfmf, the clamp statistic, and the memory bound.
 DSPEC=fmf:color=dfmf:rank=12:chroma_rank=6:oversample=8:power_iters=2:svd=randomized
 check synth-32 0 "$BTFC" synth --width 32 --height 32 --seed 5 -o "$W/s32.btfc"
-check dfmf-in-core 0 "$BTFC" -q compress "$W/s32.btfc" -c $DSPEC -o "$W/d.in.btfc"
-check dfmf-ooc 0 "$BTFC" --json compress "$W/s32.btfc" -c $DSPEC -o "$W/d.ooc.btfc" --max-memory 30M
-cp "$W/out.txt" "$W/dooc.json"
-check dfmf-cmp-in 0 "$BTFC" --json compare --no-ssim "$W/s32.btfc" "$W/d.in.btfc"
-cp "$W/out.txt" "$W/dcmp_in.json"
-check dfmf-cmp-ooc 0 "$BTFC" --json compare --no-ssim "$W/s32.btfc" "$W/d.ooc.btfc"
+in_and_out_of_core dfmf "$W/s32.btfc" $DSPEC 30M
 python3 - "$W" <<'PY' || fails=$((fails + 1))
 import json, sys
 w = sys.argv[1]
-r = json.load(open(w + "/dooc.json")); o = r["out_of_core"]; st = r["stats"]
+r = json.load(open(w + "/dfmf.ooc.json")); o = r["out_of_core"]; st = r["stats"]
 assert o["passes"] == 12 and o["work_file_built"] and o["chunks"] >= 2, o   # 3 x (power_iters + 2)
 assert o["bytes_read"] == 12 * 32 * 32 * 19683 * 2, o
 assert o["peak_rss_bytes"] <= (30 << 20) + (200 << 20), o["peak_rss_bytes"]
 assert st["rank.y"] == 12 and st["rank.u"] == 6 and "negative_luminance_clamped" in st, st
-a = json.load(open(w + "/dcmp_in.json"))["rel_l2"]; b = json.load(open(w + "/out.txt"))["rel_l2"]
+a = json.load(open(w + "/dfmf.cmp_in.json"))["rel_l2"]; b = json.load(open(w + "/out.txt"))["rel_l2"]
 assert 1e-3 < a < 0.9 and abs(a - b) / a < 0.01, (a, b)
 print("ok   dfmf-ooc-vs-in-core rel_l2 %.6f vs %.6f, peak RSS %.1f MiB" % (b, a, o["peak_rss_bytes"] / 2**20))
 PY
@@ -126,19 +134,14 @@ PY
 # svd=exact streams in 2 passes when the rows x rows Gram matrix fits (81 lights x 1 view: 243
 # rows, 32768 texels, 32 MB > 30 MiB), and is refused, naming the sizes, when it does not.
 check synth-1view 0 "$BTFC" synth --width 256 --height 128 --views 30,0 --seed 3 -o "$W/v1.btfc"
-check exact-in-core 0 "$BTFC" -q compress "$W/v1.btfc" -c fmf:rank=16:svd=exact -o "$W/e.in.btfc"
-check exact-ooc 0 "$BTFC" --json compress "$W/v1.btfc" -c fmf:rank=16:svd=exact -o "$W/e.ooc.btfc" --max-memory 30M
-cp "$W/out.txt" "$W/eooc.json"
-check exact-cmp-in 0 "$BTFC" --json compare --no-ssim "$W/v1.btfc" "$W/e.in.btfc"
-cp "$W/out.txt" "$W/ecmp_in.json"
-check exact-cmp-ooc 0 "$BTFC" --json compare --no-ssim "$W/v1.btfc" "$W/e.ooc.btfc"
+in_and_out_of_core exact "$W/v1.btfc" fmf:rank=16:svd=exact 30M
 python3 - "$W" <<'PY' || fails=$((fails + 1))
 import json, sys
 w = sys.argv[1]
-r = json.load(open(w + "/eooc.json")); o = r["out_of_core"]
+r = json.load(open(w + "/exact.ooc.json")); o = r["out_of_core"]
 assert o["passes"] == 2 and o["chunks"] >= 2 and r["stats"]["svd.rgb"] == "exact (streamed)", r
 assert o["peak_rss_bytes"] <= (30 << 20) + (200 << 20), o["peak_rss_bytes"]
-a = json.load(open(w + "/ecmp_in.json"))["rel_l2"]; b = json.load(open(w + "/out.txt"))["rel_l2"]
+a = json.load(open(w + "/exact.cmp_in.json"))["rel_l2"]; b = json.load(open(w + "/out.txt"))["rel_l2"]
 assert 1e-3 < a < 0.5 and abs(a - b) / a < 1e-4, (a, b)   # the same factorization (half rounding of the working file aside)
 print("ok   exact-ooc-vs-in-core rel_l2 %.7f vs %.7f in 2 passes" % (b, a))
 PY
