@@ -185,8 +185,23 @@ bool decompress_streamed(const Global& g, const DecompressArgs& a, int& code) {
     if (!model.ok()) return false;
     const uint64_t need = model.value()->desc().num_values() * 4;
     if (need <= *limit) return false;
-    code = fail(g, invalid_argument(a.in + ": the decoded BTF (" + format_bytes(need) + ") does not fit in --max-memory " + format_bytes(*limit) +
-                                    "; decompress to a Bonn BDI (-o OUT.btf), which is written texel band by band"));
+    if (!ends_with(a.out, ".btfc")) {
+      code = fail(g, invalid_argument(a.in + ": the decoded BTF (" + format_bytes(need) + ") does not fit in --max-memory " + format_bytes(*limit) +
+                                      "; decompress to a raw .btfc or a Bonn BDI (-o OUT.btf), which are written texel band by band"));
+      return true;
+    }
+    // A raw .btfc, written band by band as the model decodes.
+    const auto t0 = Clock::now();
+    Status s = decode_to_raw_btfc(*model.value(), a.out, *limit);
+    if (!s.ok()) return code = fail(g, s.with_context(a.in)), true;
+    const double dec_s = since(t0);
+    if (g.json)
+      std::cout << json{{"output", a.out}, {"desc", model.value()->desc().summary()}, {"decode_seconds", dec_s}, {"format", "raw .btfc"},
+                        {"max_memory", *limit}, {"peak_rss_bytes", peak_rss_bytes()}}.dump(2) << "\n";
+    else if (!g.quiet)
+      std::cout << "decoded " << a.in << " -> " << a.out << " (raw .btfc, band by band): " << model.value()->desc().summary() << " in "
+                << dec_s << " s, peak RSS " << format_bytes(peak_rss_bytes()) << "\n";
+    code = 0;
     return true;
   }
   if (subset) return code = fail(g, invalid_argument("decompress -o OUT.btf (Bonn BDI) writes the whole BTF; --region/--lights/--views/--lod need .btfc or an image set")), true;

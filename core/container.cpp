@@ -286,6 +286,8 @@ struct PlannedChunk {
   std::vector<uint8_t> head;      // whole payload of small chunks, tensor header of TNSR
   const uint8_t* data = nullptr;  // TNSR raw data (caller memory for views)
   uint64_t data_size = 0;
+  const ContainerWriter::Fill* fill = nullptr;  // a streamed TNSR: data produced while writing
+  uint64_t piece = 0;
   uint64_t size() const { return head.size() + data_size; }
 };
 
@@ -296,6 +298,8 @@ struct TensorSrc {
   const void* data;
   bool owned;           // a Tensor (bytes known) rather than a view of caller memory
   uint64_t owned_size;  // bytes the Tensor holds
+  const ContainerWriter::Fill* fill = nullptr;
+  uint64_t piece = 0;
 };
 
 Result<std::vector<PlannedChunk>> plan_chunks(const BtfDesc& desc, const CodecInfo& codec,
@@ -331,22 +335,29 @@ Result<std::vector<PlannedChunk>> plan_chunks(const BtfDesc& desc, const CodecIn
     if (t.owned && t.owned_size != bytes)
       return invalid_argument(ctx + ": dims " + shape_str(*t.shape) + " " + dtype_name(t.dtype) + " need " +
                               std::to_string(bytes) + " bytes, tensor holds " + std::to_string(t.owned_size));
-    if (bytes && !t.data) return invalid_argument(ctx + ": null data");
-    out.push_back({k_tnsr, k_flag_critical, tensor_head(*t.name, t.dtype, *t.shape), static_cast<const uint8_t*>(t.data), bytes});
+    if (bytes && !t.data && !t.fill) return invalid_argument(ctx + ": null data");
+    if (t.fill && (t.piece == 0 || t.piece % dtype_size(t.dtype) != 0)) return invalid_argument(ctx + ": stream piece size");
+    out.push_back({k_tnsr, k_flag_critical, tensor_head(*t.name, t.dtype, *t.shape), static_cast<const uint8_t*>(t.data), bytes, t.fill,
+                   t.piece});
   }
   if (!stats.empty()) out.push_back({k_stat, 0, std::vector<uint8_t>(stats.begin(), stats.end())});
   out.push_back({k_end, k_flag_critical, {}});
   return out;
 }
 
-std::vector<uint8_t> chunk_header(const PlannedChunk& ch) {
+// A chunk header; the CRC covers the header too (as PNG's covers the chunk type): a flipped type
+// or size must not turn a chunk into a silently skipped one. `data_crc` continues the CRC of the
+// header's covered bytes and the head over the data; a streamed chunk's is computed while writing.
+std::vector<uint8_t> chunk_header_with(const PlannedChunk& ch, const std::function<uint32_t(uint32_t)>& data_crc) {
   Out h;
   h.u32(ch.type), h.u32(ch.flags), h.u64(ch.size()), h.u32(0), h.u64(0);
-  // The CRC covers the header too (as PNG's covers the chunk type): a flipped type or size
-  // must not turn a chunk into a silently skipped one.
   uint32_t crc = crc_update(crc_update(0, h.b.data(), k_crc_covered), ch.head.data(), ch.head.size());
-  h.u32(crc_update(crc, ch.data, ch.data_size));
+  h.u32(data_crc(crc));
   return std::move(h.b);
+}
+
+std::vector<uint8_t> chunk_header(const PlannedChunk& ch) {
+  return chunk_header_with(ch, [&](uint32_t crc) { return crc_update(crc, ch.data, ch.data_size); });
 }
 
 std::string errno_str() { return std::strerror(errno); }
@@ -453,7 +464,11 @@ Result<std::vector<float>> Tensor::to_f32() const {
 // ---- writer --------------------------------------------------------------------------------
 
 void ContainerWriter::add_tensor_view(std::string name, DType dtype, std::vector<uint64_t> shape, const void* data) {
-  m_views.push_back({std::move(name), dtype, std::move(shape), data});
+  m_views.push_back({std::move(name), dtype, std::move(shape), data, {}, 0});
+}
+
+void ContainerWriter::add_tensor_stream(std::string name, DType dtype, std::vector<uint64_t> shape, Fill fill, uint64_t piece_bytes) {
+  m_views.push_back({std::move(name), dtype, std::move(shape), nullptr, std::move(fill), piece_bytes});
 }
 
 // Owned tensors first, then views, each in insertion order (docs/FORMAT.md, chunk order).
@@ -462,7 +477,7 @@ template <class V>
 static std::vector<TensorSrc> tensor_sources(const std::vector<Tensor>& tensors, const std::vector<V>& views) {
   std::vector<TensorSrc> srcs;
   for (const Tensor& t : tensors) srcs.push_back({&t.name, t.dtype, &t.shape, t.bytes.data(), true, t.bytes.size()});
-  for (const V& v : views) srcs.push_back({&v.name, v.dtype, &v.shape, v.data, false, 0});
+  for (const V& v : views) srcs.push_back({&v.name, v.dtype, &v.shape, v.data, false, 0, v.fill ? &v.fill : nullptr, v.piece});
   return srcs;
 }
 
@@ -479,6 +494,7 @@ uint32_t ContainerWriter::tensor_digest() const {
   if (!plan.ok()) return 0;
   uint32_t crc = 0;
   for (const PlannedChunk& ch : plan.value()) {
+    if (ch.fill) return 0;  // its bytes exist only while writing
     const std::vector<uint8_t> hdr = chunk_header(ch);
     crc = crc_update(crc, hdr.data(), hdr.size());
     crc = crc_update(crc, ch.head.data(), ch.head.size());
@@ -509,11 +525,31 @@ Status ContainerWriter::write(const std::string& path) const {
   h.u32(crc_update(0, h.b.data(), k_crc_covered));
   bool ok = put(h.b.data(), h.b.size());
   static const uint8_t zeros[16] = {};
+  Status fill_error;
   for (const PlannedChunk& ch : plan.value()) {
     if (!ok) break;
-    std::vector<uint8_t> hdr = chunk_header(ch);
-    ok = put(hdr.data(), hdr.size()) && put(ch.head.data(), ch.head.size()) && put(ch.data, ch.data_size) &&
-         put(zeros, pad16(ch.size()));
+    if (!ch.fill) {
+      std::vector<uint8_t> hdr = chunk_header(ch);
+      ok = put(hdr.data(), hdr.size()) && put(ch.head.data(), ch.head.size()) && put(ch.data, ch.data_size) &&
+           put(zeros, pad16(ch.size()));
+      continue;
+    }
+    // Streamed: a header with a placeholder CRC, the pieces as fill() makes them (CRC running
+    // over them), then the real header over the placeholder.
+    const off_t at = ftello(f);
+    std::vector<uint8_t> hdr = chunk_header_with(ch, [](uint32_t) { return 0u; });
+    ok = at >= 0 && put(hdr.data(), hdr.size()) && put(ch.head.data(), ch.head.size());
+    uint32_t dcrc = 0;
+    std::vector<uint8_t> piece(size_t(std::min(ch.piece, std::max<uint64_t>(ch.data_size, 1))));
+    for (uint64_t off = 0; ok && off < ch.data_size; off += piece.size()) {
+      const uint64_t n = std::min<uint64_t>(piece.size(), ch.data_size - off);
+      fill_error = (*ch.fill)(off, n, piece.data());
+      ok = fill_error.ok() && put(piece.data(), n);
+      dcrc = crc_update(dcrc, piece.data(), n);
+    }
+    if (!ok) break;
+    hdr = chunk_header_with(ch, [&](uint32_t crc) { return uint32_t(crc32_combine(crc, dcrc, z_off_t(ch.data_size))); });
+    ok = put(zeros, pad16(ch.size())) && fseeko(f, at, SEEK_SET) == 0 && put(hdr.data(), hdr.size()) && fseeko(f, 0, SEEK_END) == 0;
   }
   // Flush and sync before the rename so a crash never leaves a short file under `path`.
   ok = ok && std::fflush(f) == 0 && fsync(fileno(f)) == 0;
@@ -521,6 +557,7 @@ Status ContainerWriter::write(const std::string& path) const {
   if (std::fclose(f) != 0 && ok) ok = false, err = errno_str();
   if (!ok) {
     std::remove(tmp.c_str());
+    if (!fill_error.ok()) return fill_error.with_context(path);
     return io_error(path + ": write to '" + tmp + "' failed: " + err);
   }
   if (std::rename(tmp.c_str(), path.c_str()) != 0) {
@@ -747,6 +784,19 @@ Status save_raw_btf(const Btf& btf, const std::string& path) {
   w.set_desc(d);
   w.set_codec({"raw", 1, "raw", btfc_version()});
   w.add_tensor_view("data", DType::f32, {d.num_texels(), d.abrdf_size()}, btf.data());
+  return w.write(path);
+}
+
+Status save_raw_btf_streamed(const BtfDesc& d, const std::string& path, uint64_t band_texels,
+                             const std::function<Status(uint64_t t0, uint64_t n, float* dst)>& fill) {
+  const uint64_t texel_bytes = d.abrdf_size() * 4;
+  ContainerWriter w;
+  w.set_desc(d);
+  w.set_codec({"raw", 1, "raw", btfc_version()});
+  w.add_tensor_stream(
+      "data", DType::f32, {d.num_texels(), d.abrdf_size()},
+      [&](uint64_t off, uint64_t n, void* dst) { return fill(off / texel_bytes, n / texel_bytes, static_cast<float*>(dst)); },
+      std::max<uint64_t>(band_texels, 1) * texel_bytes);
   return w.write(path);
 }
 

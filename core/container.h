@@ -19,6 +19,7 @@
 //  - Not thread-safe; one reader per thread.
 #pragma once
 #include <cstdint>
+#include <functional>
 #include <cstdio>
 #include <memory>
 #include <string>
@@ -62,6 +63,12 @@ class ContainerWriter {
   // A float tensor written straight from caller memory (no copy), e.g. a raw BTF's data.
   // The pointer must stay valid until write() returns.
   void add_tensor_view(std::string name, DType dtype, std::vector<uint64_t> shape, const void* data);
+  // A tensor produced while writing, for payloads larger than memory: write() calls
+  // fill(offset, n, dst) for consecutive byte ranges of at most piece_bytes (offset and n
+  // multiples of the dtype size), writes each, and puts the chunk's CRC into its header last.
+  // tensor_digest() is 0 for a writer holding one.
+  using Fill = std::function<Status(uint64_t offset, uint64_t n, void* dst)>;
+  void add_tensor_stream(std::string name, DType dtype, std::vector<uint64_t> shape, Fill fill, uint64_t piece_bytes);
   void set_stats(std::string text) { m_stats = std::move(text); }
   Status write(const std::string& path) const;
   // Total bytes write() would produce.
@@ -76,6 +83,8 @@ class ContainerWriter {
     DType dtype;
     std::vector<uint64_t> shape;
     const void* data;
+    Fill fill;  // set: a streamed tensor (data is a placeholder)
+    uint64_t piece = 0;
   };
   BtfDesc m_desc;
   CodecInfo m_codec;
@@ -139,6 +148,10 @@ class ContainerReader {
 // Uncompressed BTFs use the same container with codec name "raw" and one f32 tensor "data"
 // of shape [num_texels, abrdf_size] in the layout of core/btf.h.
 Status save_raw_btf(const Btf& btf, const std::string& path);
+// The same for a BTF that is never whole in memory: fill(t0, n, dst) decodes texels
+// [t0, t0 + n) (n * abrdf_size floats) for bands of at most band_texels, in order.
+Status save_raw_btf_streamed(const BtfDesc& desc, const std::string& path, uint64_t band_texels,
+                             const std::function<Status(uint64_t t0, uint64_t n, float* dst)>& fill);
 Result<Btf> load_raw_btf(const ContainerReader& reader);
 
 // Version string of this build, stored in CODC.

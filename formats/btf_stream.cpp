@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <future>
 
@@ -189,6 +190,21 @@ Result<WorkFile> prepare_work_file(const std::string& input, const std::string& 
   wf.bytes_written = fs::file_size(work_path, ec);
   wf.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return wf;
+}
+
+Status decode_to_raw_btfc(const Model& model, const std::string& path, size_t max_bytes) {
+  const BtfDesc& d = model.desc();
+  // The decoded band and the writer's piece of the same band: 8 bytes per value.
+  const uint64_t lines = band_lines(d, 8, max_bytes), width = uint64_t(d.width);
+  Btf band;
+  return save_raw_btf_streamed(d, path, lines * width, [&](uint64_t t0, uint64_t n, float* dst) -> Status {
+    DecodeRequest req;  // pieces are whole bands: t0 and n are multiples of the width
+    req.y0 = int(t0 / width);
+    req.height = int(n / width);
+    BTFC_RETURN_IF_ERROR(model.decode(req, band));
+    std::memcpy(dst, band.data(), size_t(n * d.abrdf_size()) * sizeof(float));
+    return {};
+  });
 }
 
 Status decode_to_bdi(const Model& model, const std::string& path, size_t max_bytes) {

@@ -45,6 +45,10 @@ Result<WorkFile> prepare_work_file(const std::string& input, const std::string& 
 // Decodes `model` band by band into an uncompressed BDI at `path` (written under a temporary
 // name, renamed when complete), holding at most about max_bytes of decoded values.
 Status decode_to_bdi(const Model& model, const std::string& path, size_t max_bytes);
+// The same into a raw .btfc (float values, so HDR of any range): the container's data tensor is
+// written band by band as the model decodes it, its CRC put into the chunk header last
+// (core/container.h save_raw_btf_streamed).
+Status decode_to_raw_btfc(const Model& model, const std::string& path, size_t max_bytes);
 
 }  // namespace btfc
 

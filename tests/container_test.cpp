@@ -659,6 +659,44 @@ TEST_F(ContainerTest, WriteReplacesExistingFile) {
   EXPECT_EQ(read_bytes(p), read_bytes(small_file()));
 }
 
+// A raw BTF written band by band (save_raw_btf_streamed: the tensor CRC goes into its header
+// last) is the same file, byte for byte, as the one written from memory, for bands that do and
+// do not divide the texel count; a failing band leaves no file behind and names its error.
+TEST_F(ContainerTest, StreamedRawBtfIsTheSameFile) {
+  BtfDesc d = make_desc();
+  d.width = 5, d.height = 3;
+  auto btf = Btf::create(d);
+  ASSERT_TRUE(btf.ok());
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<float> dist(-1.0f, 1e4f);
+  for (size_t i = 0; i < btf->size(); ++i) btf->data()[i] = dist(rng);
+  const std::string whole = tmp("whole.btfc");
+  ASSERT_TRUE(save_raw_btf(btf.value(), whole).ok());
+  for (uint64_t band : {uint64_t(1), uint64_t(4), uint64_t(15), uint64_t(100)}) {
+    const std::string p = tmp("streamed.btfc");
+    std::vector<uint64_t> seen;
+    Status s = save_raw_btf_streamed(d, p, band, [&](uint64_t t0, uint64_t n, float* dst) -> Status {
+      seen.push_back(t0);
+      std::memcpy(dst, btf->abrdf(t0), size_t(n * d.abrdf_size()) * sizeof(float));
+      return {};
+    });
+    ASSERT_TRUE(s.ok()) << s.message();
+    EXPECT_EQ(read_bytes(p), read_bytes(whole)) << "band " << band;
+    EXPECT_EQ(seen.size(), (15 + std::min<uint64_t>(band, 15) - 1) / std::min<uint64_t>(band, 15)) << band;
+    auto r = ContainerReader::open(p);
+    ASSERT_TRUE(r.ok());
+    EXPECT_TRUE(r->verify_all().ok());
+  }
+  const std::string bad = tmp("failed.btfc");
+  Status s = save_raw_btf_streamed(d, bad, 4, [&](uint64_t t0, uint64_t, float*) -> Status {
+    return t0 >= 8 ? io_error("band at texel " + std::to_string(t0) + " failed (injected)") : Status{};
+  });
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("band at texel 8 failed"), std::string::npos) << s.message();
+  EXPECT_FALSE(fs::exists(bad));
+  for (const auto& e : fs::directory_iterator(s_dir)) EXPECT_EQ(e.path().string().find("failed.btfc.tmp"), std::string::npos) << e.path();
+}
+
 TEST_F(ContainerTest, RawBtfRoundTrip) {
   BtfDesc d = make_desc();
   d.width = 5, d.height = 2;

@@ -2,7 +2,7 @@
 # Out-of-core CLI checks through the real binary: `compress --max-memory` on a BTF larger than
 # the limit streams (same factorization as in core, peak RSS under limit + overhead), the
 # working file is a valid Bonn BDI, an interrupted working file is detected and rebuilt,
-# color=dfmf and svd=exact stream too, and `decompress -o OUT.btf` streams. Usage: BTFC=path/to/btfc stream_test.sh WORKDIR
+# color=dfmf and svd=exact stream too, and `decompress -o OUT.btf / OUT.btfc` streams. Usage: BTFC=path/to/btfc stream_test.sh WORKDIR
 set -uo pipefail
 W=$1
 rm -rf "$W" && mkdir -p "$W"
@@ -173,12 +173,19 @@ python3 -c "
 import json; a=json.load(open('$W/setin.json'))['rel_l2']; b=json.load(open('$W/out.txt'))['rel_l2']
 assert 1e-4 < a < 0.5 and abs(a - b) / a < 0.01, (a, b); print('ok   image-set in core %.6f, out of core %.6f' % (a, b))" || fails=$((fails + 1))
 
-# decompress to a Bonn BDI streams texel bands; decompress to .btfc beyond the limit refuses.
+# decompress to a Bonn BDI or a raw .btfc streams texel bands (the .btfc byte for byte the
+# in-memory one, its CRC written last); to an image set beyond the limit it refuses.
 check decompress-bdi 0 "$BTFC" --json decompress "$W/ooc.btfc" -o "$W/d.btf" --max-memory 8M
 check cmp-bdi 0 "$BTFC" --json compare --no-ssim "$W/ooc.btfc" "$W/d.btf"
 python3 -c "import json; m=json.load(open('$W/out.txt')); assert m['rel_l2'] < 2e-3, m; print('ok   bdi-decoded', m['rel_l2'])" || fails=$((fails + 1))
-check decompress-too-big 1 "$BTFC" decompress "$W/ooc.btfc" -o "$W/d2.btfc" --max-memory 8M
-expect_grep decompress-msg "decompress to a Bonn BDI" "$W/err.txt"
+check decompress-btfc 0 "$BTFC" --device cpu --json decompress "$W/ooc.btfc" -o "$W/d2.btfc" --max-memory 8M
+python3 -c "import json; m=json.load(open('$W/out.txt')); assert m['format'] == 'raw .btfc' and m['peak_rss_bytes'] <= (8 << 20) + (200 << 20), m; print('ok   btfc-streamed peak RSS %.1f MiB' % (m['peak_rss_bytes'] / 2**20))" || fails=$((fails + 1))
+check decompress-btfc-in-memory 0 "$BTFC" --device cpu -q decompress "$W/ooc.btfc" -o "$W/d3.btfc"
+cmp -s "$W/d2.btfc" "$W/d3.btfc" && echo "ok   btfc-streamed-identical" || { echo "FAIL btfc-streamed-identical"; fails=$((fails + 1)); }
+check decompress-btfc-verify 0 "$BTFC" info --verify "$W/d2.btfc"
+check decompress-too-big 1 "$BTFC" decompress "$W/ooc.btfc" -o "$W/dimg" --max-memory 8M
+expect_grep decompress-msg "decompress to a raw .btfc or a Bonn BDI" "$W/err.txt"
+[ -e "$W/dimg" ] && { echo "FAIL decompress-too-big-output"; fails=$((fails + 1)); }
 # A given --max-memory is also the in-core limit: a region decode beyond it is refused, one within it runs.
 check decompress-region-limit 1 "$BTFC" decompress "$W/ooc.btfc" -o "$W/r.btfc" --region 0,0,40,40 --max-memory 8M
 expect_grep decompress-region-msg "over the memory limit of 8388608 bytes" "$W/err.txt"
