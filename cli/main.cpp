@@ -71,7 +71,7 @@ int main(int argc, char** argv) {
   decompress->add_option("--lights", da.lights, "comma-separated light indices");
   decompress->add_option("--views", da.views, "comma-separated view indices");
   decompress->add_option("--format", da.format, "image-set format")->check(CLI::IsMember({"exr", "png"}));
-  decompress->add_option("--max-memory", da.max_memory, "decoded data held in memory at most; -o OUT.btf (Bonn BDI) or OUT.btfc (raw) streams");
+  decompress->add_option("--max-memory", da.max_memory, "decoded data held in memory at most; larger outputs (.btfc, Bonn .btf, image sets) are written in parts");
   decompress->add_option("--lod", da.lod, "level of detail (lpyr): 0 = full detail")->check(CLI::Range(0.0, 64.0));
   decompress->callback([&] { code = cmd_decompress(g, da); });
 

@@ -16,6 +16,7 @@
 #include "formats/bonn/bdi_work.h"
 #include "formats/btf_io.h"
 #include "formats/btf_stream.h"
+#include "formats/image_set.h"
 
 namespace btfc::cli {
 namespace {
@@ -185,22 +186,28 @@ bool decompress_streamed(const Global& g, const DecompressArgs& a, int& code) {
     if (!model.ok()) return false;
     const uint64_t need = model.value()->desc().num_values() * 4;
     if (need <= *limit) return false;
-    if (!ends_with(a.out, ".btfc")) {
-      code = fail(g, invalid_argument(a.in + ": the decoded BTF (" + format_bytes(need) + ") does not fit in --max-memory " + format_bytes(*limit) +
-                                      "; decompress to a raw .btfc or a Bonn BDI (-o OUT.btf), which are written texel band by band"));
-      return true;
-    }
-    // A raw .btfc, written band by band as the model decodes.
+    // A raw .btfc written band by band as the model decodes, or an image set view by view
+    // (groups of lights).
+    const bool raw = ends_with(a.out, ".btfc");
+    const Model& m = *model.value();
     const auto t0 = Clock::now();
-    Status s = decode_to_raw_btfc(*model.value(), a.out, *limit);
+    Status s = raw ? decode_to_raw_btfc(m, a.out, *limit)
+                   : write_image_set_streamed(m.desc(), a.out, a.format == "png" ? ImageFormat::png : ImageFormat::exr, *limit,
+                                              [&](size_t v, size_t l0, size_t n, Btf& part) {
+                                                DecodeRequest req;
+                                                req.views = {int(v)};
+                                                for (size_t l = l0; l < l0 + n; ++l) req.lights.push_back(int(l));
+                                                return m.decode(req, part);
+                                              });
     if (!s.ok()) return code = fail(g, s.with_context(a.in)), true;
     const double dec_s = since(t0);
+    const char* what = raw ? "raw .btfc" : "image set";
     if (g.json)
-      std::cout << json{{"output", a.out}, {"desc", model.value()->desc().summary()}, {"decode_seconds", dec_s}, {"format", "raw .btfc"},
+      std::cout << json{{"output", a.out}, {"desc", m.desc().summary()}, {"decode_seconds", dec_s}, {"format", what},
                         {"max_memory", *limit}, {"peak_rss_bytes", peak_rss_bytes()}}.dump(2) << "\n";
     else if (!g.quiet)
-      std::cout << "decoded " << a.in << " -> " << a.out << " (raw .btfc, band by band): " << model.value()->desc().summary() << " in "
-                << dec_s << " s, peak RSS " << format_bytes(peak_rss_bytes()) << "\n";
+      std::cout << "decoded " << a.in << " -> " << a.out << " (" << what << ", in parts within --max-memory): " << m.desc().summary()
+                << " in " << dec_s << " s, peak RSS " << format_bytes(peak_rss_bytes()) << "\n";
     code = 0;
     return true;
   }

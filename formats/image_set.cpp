@@ -431,71 +431,127 @@ Status write_one(const Btf& btf, size_t l, size_t v, const std::string& file, co
   return {};
 }
 
-Status write_impl(const Btf& btf, const std::string& dir_in, ImageFormat format) {
-  const BtfDesc& d = btf.desc();
-  if (d.channels != 3)
-    return unsupported("cannot write image set " + dir_in + ": " + std::to_string(d.channels) + " channels, need 3 (RGB)");
-  BTFC_ASSIGN_OR_RETURN(std::vector<Angles> ln, name_set(d.lights, "light"));
-  BTFC_ASSIGN_OR_RETURN(std::vector<Angles> vn, name_set(d.views, "view"));
-
-  std::string dir_str = dir_in;
-  while (dir_str.size() > 1 && dir_str.back() == '/') dir_str.pop_back();
-  const fs::path dir(dir_str);
-  std::error_code ec;
-  if (fs::exists(dir, ec) && !(fs::is_directory(dir, ec) && fs::is_empty(dir, ec)))
-    return io_error(dir_str + ": already exists and is not an empty directory");
-  const fs::path tmp(dir_str + ".tmp-" + std::to_string(getpid()));
-  fs::remove_all(tmp, ec);  // a stale temp of an earlier process with our pid
-  // Half keeps EXRs small (UTIA stores half); values beyond its range (HDR scale tests) need float.
-  OIIO::TypeDesc exr_type = OIIO::TypeDesc::HALF;
-  for (size_t i = 0; i < btf.size() && format == ImageFormat::exr; ++i)
-    if (std::fabs(btf.data()[i]) > 65000.0f) {
-      exr_type = OIIO::TypeDesc::FLOAT;
-      break;
+// Writes an image set into a temporary directory next to `dir`, part by part, and renames it
+// into place at the end (no partial output): `part` holds the images of lights
+// [l0, l0 + part lights) and views [v0, v0 + part views) of the whole set `d`.
+class SetWriter {
+ public:
+  Status open(const BtfDesc& d, const std::string& dir_in, ImageFormat format) {
+    m_d = d, m_format = format;
+    if (d.channels != 3)
+      return unsupported("cannot write image set " + dir_in + ": " + std::to_string(d.channels) + " channels, need 3 (RGB)");
+    BTFC_ASSIGN_OR_RETURN(m_ln, name_set(d.lights, "light"));
+    BTFC_ASSIGN_OR_RETURN(m_vn, name_set(d.views, "view"));
+    m_dir = dir_in;
+    while (m_dir.size() > 1 && m_dir.back() == '/') m_dir.pop_back();
+    std::error_code ec;
+    const fs::path dir(m_dir);
+    if (fs::exists(dir, ec) && !(fs::is_directory(dir, ec) && fs::is_empty(dir, ec)))
+      return io_error(m_dir + ": already exists and is not an empty directory");
+    m_tmp = fs::path(m_dir + ".tmp-" + std::to_string(getpid()));
+    fs::remove_all(m_tmp, ec);  // a stale temp of an earlier process with our pid
+    for (size_t v = 0; v < d.num_views(); ++v) {
+      char sub[32];
+      std::snprintf(sub, sizeof sub, "tv%03d_pv%03d", m_vn[v].theta, m_vn[v].phi);
+      if (!fs::create_directories(m_tmp / sub, ec) && ec) return fail(io_error((m_tmp / sub).string() + ": cannot create: " + ec.message()));
     }
-
-  const char* ext = format == ImageFormat::exr ? "exr" : "png";
-  const size_t nl = d.num_lights(), nv = d.num_views();
-  for (size_t v = 0; v < nv; ++v) {
-    char sub[32];
-    std::snprintf(sub, sizeof sub, "tv%03d_pv%03d", vn[v].theta, vn[v].phi);
-    if (!fs::create_directories(tmp / sub, ec) && ec) return io_error((tmp / sub).string() + ": cannot create: " + ec.message());
+    m_open = true;
+    return {};
   }
-  const long items = long(nl * nv);
-  std::vector<Status> errors(static_cast<size_t>(items));
-  std::atomic<bool> failed{false};
-#pragma omp parallel
-  {
-    std::vector<float> buf;
-    std::vector<uint8_t> bytes;
-#pragma omp for schedule(dynamic, 4)
-    for (long it = 0; it < items; ++it) {
-      if (failed) continue;
-      const size_t l = size_t(it) % nl, v = size_t(it) / nl;
-      char name[96];
-      std::snprintf(name, sizeof name, "tv%03d_pv%03d/tl%03d_pl%03d_tv%03d_pv%03d.%s", vn[v].theta, vn[v].phi, ln[l].theta,
-                    ln[l].phi, vn[v].theta, vn[v].phi, ext);
-      const std::string shown = dir_str + "/" + name;
-      try {
-        errors[it] = write_one(btf, l, v, (tmp / name).string(), shown, format, exr_type, buf, bytes);
-      } catch (const std::exception& e) {
-        errors[it] = io_error(shown + ": " + e.what());
+  ~SetWriter() {
+    std::error_code ec;
+    if (m_open) fs::remove_all(m_tmp, ec);
+  }
+
+  Status write(const Btf& part, size_t l0, size_t v0) {
+    const BtfDesc& pd = part.desc();
+    // Half keeps EXRs small (UTIA stores half); values beyond its range (HDR) need float.
+    OIIO::TypeDesc exr_type = OIIO::TypeDesc::HALF;
+    for (size_t i = 0; i < part.size() && m_format == ImageFormat::exr; ++i)
+      if (std::fabs(part.data()[i]) > 65000.0f) {
+        exr_type = OIIO::TypeDesc::FLOAT;
+        break;
       }
-      if (!errors[it].ok()) failed = true;
+    const char* ext = m_format == ImageFormat::exr ? "exr" : "png";
+    const size_t nl = pd.num_lights(), nv = pd.num_views();
+    const long items = long(nl * nv);
+    std::vector<Status> errors(static_cast<size_t>(items));
+    std::atomic<bool> failed{false};
+#pragma omp parallel
+    {
+      std::vector<float> buf;
+      std::vector<uint8_t> bytes;
+#pragma omp for schedule(dynamic, 4)
+      for (long it = 0; it < items; ++it) {
+        if (failed) continue;
+        const size_t l = size_t(it) % nl, v = size_t(it) / nl, gl = l0 + l, gv = v0 + v;
+        char name[96];
+        std::snprintf(name, sizeof name, "tv%03d_pv%03d/tl%03d_pl%03d_tv%03d_pv%03d.%s", m_vn[gv].theta, m_vn[gv].phi, m_ln[gl].theta,
+                      m_ln[gl].phi, m_vn[gv].theta, m_vn[gv].phi, ext);
+        const std::string shown = m_dir + "/" + name;
+        try {
+          errors[it] = write_one(part, l, v, (m_tmp / name).string(), shown, m_format, exr_type, buf, bytes);
+        } catch (const std::exception& e) {
+          errors[it] = io_error(shown + ": " + e.what());
+        }
+        if (!errors[it].ok()) failed = true;
+      }
     }
+    for (const Status& e : errors)
+      if (!e.ok()) return fail(e);
+    return {};
   }
-  for (const Status& s : errors)
-    if (!s.ok()) {
-      fs::remove_all(tmp, ec);
-      return s;
+
+  Status finish() {
+    std::error_code ec;
+    fs::rename(m_tmp, fs::path(m_dir), ec);  // replaces an empty `dir` atomically (rename(2))
+    if (ec) return fail(io_error(m_dir + ": cannot rename " + m_tmp.string() + " into place: " + ec.message()));
+    m_open = false;
+    return {};
+  }
+
+ private:
+  Status fail(Status s) {
+    std::error_code ec;
+    fs::remove_all(m_tmp, ec);
+    m_open = false;
+    return s;
+  }
+  BtfDesc m_d;
+  ImageFormat m_format = ImageFormat::exr;
+  std::vector<Angles> m_ln, m_vn;
+  std::string m_dir;
+  fs::path m_tmp;
+  bool m_open = false;
+};
+
+Status write_impl(const Btf& btf, const std::string& dir, ImageFormat format) {
+  SetWriter w;
+  BTFC_RETURN_IF_ERROR(w.open(btf.desc(), dir, format));
+  BTFC_RETURN_IF_ERROR(w.write(btf, 0, 0));
+  return w.finish();
+}
+
+Status write_streamed_impl(const BtfDesc& d, const std::string& dir, ImageFormat format, size_t max_bytes, const ImagePartFn& decode) {
+  // One view's lights at a time, as many as fit: the decoded part (float) plus the writer
+  // threads' one-image buffers.
+  const uint64_t image_bytes = d.num_texels() * uint64_t(d.channels) * 4;
+  if (2 * image_bytes > max_bytes)
+    return invalid_argument(dir + ": one image of " + std::to_string(d.width) + "x" + std::to_string(d.height) + " texels needs " +
+                            std::to_string(2 * image_bytes) + " bytes to decode and write, more than the limit of " + std::to_string(max_bytes));
+  SetWriter w;
+  BTFC_RETURN_IF_ERROR(w.open(d, dir, format));
+  const size_t group = size_t(std::clamp<uint64_t>(max_bytes / std::max<uint64_t>(image_bytes, 1) / 2, 1, d.num_lights()));
+  Btf part;
+  for (size_t v = 0; v < d.num_views(); ++v)
+    for (size_t l0 = 0; l0 < d.num_lights(); l0 += group) {
+      const size_t n = std::min(group, d.num_lights() - l0);
+      BTFC_RETURN_IF_ERROR(decode(v, l0, n, part));
+      if (part.desc().num_lights() != n || part.desc().num_views() != 1 || part.desc().num_texels() != d.num_texels())
+        return invalid_argument(dir + ": a decoded part has the wrong shape");
+      BTFC_RETURN_IF_ERROR(w.write(part, l0, v));
     }
-  fs::rename(tmp, dir, ec);  // replaces an empty `dir` atomically (rename(2))
-  if (ec) {
-    const std::string msg = ec.message();
-    fs::remove_all(tmp, ec);
-    return io_error(dir_str + ": cannot rename " + tmp.string() + " into place: " + msg);
-  }
-  return {};
+  return w.finish();
 }
 
 }  // namespace
@@ -503,6 +559,15 @@ Status write_impl(const Btf& btf, const std::string& dir_in, ImageFormat format)
 Status write_image_set(const Btf& btf, const std::string& dir, ImageFormat format) {
   try {
     return write_impl(btf, dir, format);
+  } catch (const std::exception& e) {
+    return io_error(dir + ": " + e.what());
+  }
+}
+
+Status write_image_set_streamed(const BtfDesc& desc, const std::string& dir, ImageFormat format, size_t max_bytes,
+                                const ImagePartFn& decode) {
+  try {
+    return write_streamed_impl(desc, dir, format, max_bytes, decode);
   } catch (const std::exception& e) {
     return io_error(dir + ": " + e.what());
   }

@@ -16,6 +16,7 @@
 //  - The writer writes the UTIA layout (EXR linear half/float, or PNG 8-bit sRGB) to a temp
 //    directory renamed on success.
 #pragma once
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -52,5 +53,12 @@ Status read_images(const ImageSetPlan& plan, size_t first, size_t last, float* d
 
 enum class ImageFormat { exr, png };
 Status write_image_set(const Btf& btf, const std::string& dir, ImageFormat format);
+// The same for a BTF that is never whole in memory: decode(v, l0, n, part) fills `part` with
+// view v's lights [l0, l0 + n) at every texel; parts of at most about max_bytes / 2 are asked
+// for, one view at a time. The set appears under `dir` only when complete. An EXR part with
+// values beyond the half range is written as float (per part, so a set may mix the two).
+using ImagePartFn = std::function<Status(size_t view, size_t light0, size_t lights, Btf& part)>;
+Status write_image_set_streamed(const BtfDesc& desc, const std::string& dir, ImageFormat format, size_t max_bytes,
+                                const ImagePartFn& decode);
 
 }  // namespace btfc
