@@ -659,17 +659,24 @@ TEST_F(ContainerTest, WriteReplacesExistingFile) {
   EXPECT_EQ(read_bytes(p), read_bytes(small_file()));
 }
 
+// A BTF of make_desc()'s directions, w x h texels, uniform values in [lo, hi) from `seed`.
+Result<Btf> random_btf(int w, int h, unsigned seed, float lo, float hi) {
+  BtfDesc d = make_desc();
+  d.width = w, d.height = h;
+  BTFC_ASSIGN_OR_RETURN(Btf btf, Btf::create(d));
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> dist(lo, hi);
+  for (size_t i = 0; i < btf.size(); ++i) btf.data()[i] = dist(rng);
+  return btf;
+}
+
 // A raw BTF written band by band (save_raw_btf_streamed: the tensor CRC goes into its header
 // last) is the same file, byte for byte, as the one written from memory, for bands that do and
 // do not divide the texel count; a failing band leaves no file behind and names its error.
 TEST_F(ContainerTest, StreamedRawBtfIsTheSameFile) {
-  BtfDesc d = make_desc();
-  d.width = 5, d.height = 3;
-  auto btf = Btf::create(d);
+  auto btf = random_btf(5, 3, 9, -1.0f, 1e4f);
   ASSERT_TRUE(btf.ok());
-  std::mt19937 rng(9);
-  std::uniform_real_distribution<float> dist(-1.0f, 1e4f);
-  for (size_t i = 0; i < btf->size(); ++i) btf->data()[i] = dist(rng);
+  const BtfDesc& d = btf->desc();
   const std::string whole = tmp("whole.btfc");
   ASSERT_TRUE(save_raw_btf(btf.value(), whole).ok());
   for (uint64_t band : {uint64_t(1), uint64_t(4), uint64_t(15), uint64_t(100)}) {
@@ -698,13 +705,9 @@ TEST_F(ContainerTest, StreamedRawBtfIsTheSameFile) {
 }
 
 TEST_F(ContainerTest, RawBtfRoundTrip) {
-  BtfDesc d = make_desc();
-  d.width = 5, d.height = 2;
-  auto btf = Btf::create(d);
+  auto btf = random_btf(5, 2, 7, 0.0f, 4.0f);
   ASSERT_TRUE(btf.ok());
-  std::mt19937 rng(7);
-  std::uniform_real_distribution<float> dist(0.0f, 4.0f);
-  for (size_t i = 0; i < btf->size(); ++i) btf->data()[i] = dist(rng);
+  const BtfDesc& d = btf->desc();
   const std::string p = tmp("raw.btfc");
   ASSERT_TRUE(save_raw_btf(btf.value(), p).ok());
 
