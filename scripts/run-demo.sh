@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The main job on an embedded default: synthesize a demo BTF, compress it with every registered
-# codec, decode, compare, and print one table row per codec; then the same on the real measured
-# slice in ../shared/data when it is present.
+# codec, decode, compare, and print one table row per codec; export every model for the GPU;
+# compress it out of core and over 2 MPI ranks; then the table on the real measured slice in
+# ../shared/data when it is present.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh
@@ -22,6 +23,17 @@ for c in $("$BTFC" codecs --names); do
   "$BTFC" -q compress "$WORK/demo.btfc" -c "$c" -o "$WORK/demo.$c.btfc"
   "$BTFC" export "$WORK/demo.$c.btfc" --to "$WORK/export-$c" --no-previews | head -1
 done
+
+echo
+echo "== out of core: the same BTF (322 MB as float32) within --max-memory 100M, then across 2 MPI ranks"
+"$BTFC" compress "$WORK/demo.btfc" -c fmf:rank=32 -o "$WORK/demo.ooc.btfc" --max-memory 100M
+"$BTFC" compare --no-ssim "$WORK/demo.btfc" "$WORK/demo.ooc.btfc"
+MPI_BIN=${BTFC_BUILD_DIR:-build}/btfc-mpi
+if [ -x "$MPI_BIN" ] && command -v mpirun >/dev/null; then
+  OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \
+    mpirun --oversubscribe -n 2 "$MPI_BIN" compress "$WORK/demo.btfc" -c fmf:rank=32 -o "$WORK/demo.mpi.btfc" --max-memory 100M
+  "$BTFC" compare --no-ssim "$WORK/demo.ooc.btfc" "$WORK/demo.mpi.btfc"
+fi
 
 REAL=../shared/data/ubo2003_tv000_pv000_81lights
 if [ -d "$REAL" ]; then
