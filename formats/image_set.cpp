@@ -437,7 +437,7 @@ Status write_one(const Btf& btf, size_t l, size_t v, const std::string& file, co
 class SetWriter {
  public:
   Status open(const BtfDesc& d, const std::string& dir_in, ImageFormat format) {
-    m_d = d, m_format = format;
+    m_format = format;
     if (d.channels != 3)
       return unsupported("cannot write image set " + dir_in + ": " + std::to_string(d.channels) + " channels, need 3 (RGB)");
     BTFC_ASSIGN_OR_RETURN(m_ln, name_set(d.lights, "light"));
@@ -517,7 +517,6 @@ class SetWriter {
     m_open = false;
     return s;
   }
-  BtfDesc m_d;
   ImageFormat m_format = ImageFormat::exr;
   std::vector<Angles> m_ln, m_vn;
   std::string m_dir;
