@@ -91,8 +91,22 @@ struct Err {
   size_t n = 0;
 };
 
-// Emulation vs model: per channel |e - m| / (|m| + floor), floor = 1e-4 of the largest |m| (the
-// relative bound holds for non-negative node colours; the floor covers channels near zero).
+// Per channel |e - m| / (|m| + floor), floor = 1e-4 of the largest |m| (the relative bound holds
+// for non-negative node colours; the floor covers channels near zero), over n queries.
+Err error_of(const std::vector<float>& ref, const std::vector<float>& emu, size_t n) {
+  double mx = 0;
+  for (float r : ref) mx = std::max(mx, double(std::fabs(r)));
+  Err e;
+  for (size_t i = 0; i < ref.size(); ++i) {
+    const double a = std::fabs(double(emu[i]) - ref[i]);
+    e.max_abs = std::max(e.max_abs, a);
+    e.max_rel = std::max(e.max_rel, a / (std::fabs(ref[i]) + 1e-4 * mx));
+  }
+  e.n = n;
+  return e;
+}
+
+// Emulation vs model at the measured directions, relative as error_of.
 Err measured_error(const Model& m, const ExportBundle& b, int step) {
   const BtfDesc& d = m.desc();
   std::vector<float> ref, emu;
@@ -113,16 +127,7 @@ Err measured_error(const Model& m, const ExportBundle& b, int step) {
             ref.push_back(c < d.channels ? mv[c] : 0.f), emu.push_back(c < d.channels ? ev[c] : 0.f);
           }
         }
-  double mx = 0;
-  for (float r : ref) mx = std::max(mx, double(std::fabs(r)));
-  Err e;
-  for (size_t i = 0; i < ref.size(); ++i) {
-    const double a = std::fabs(double(emu[i]) - ref[i]);
-    e.max_abs = std::max(e.max_abs, a);
-    e.max_rel = std::max(e.max_rel, a / (std::fabs(ref[i]) + 1e-4 * mx));
-  }
-  e.n = ref.size() / 3;
-  return e;
+  return error_of(ref, emu, ref.size() / 3);
 }
 
 Vec3 random_dir(std::mt19937& rng, float min_z) {
@@ -156,16 +161,7 @@ Err direction_error(const Model& m, const ExportBundle& b, int count) {
     find_exporter("mlvq")->emulate(b, q, ev);
     for (int c = 0; c < d.channels; ++c) ref.push_back(mv[c]), emu.push_back(ev[c]);
   }
-  double mx = 0;
-  for (float r : ref) mx = std::max(mx, double(std::fabs(r)));
-  Err e;
-  for (size_t i = 0; i < ref.size(); ++i) {
-    const double a = std::fabs(double(emu[i]) - ref[i]);
-    e.max_abs = std::max(e.max_abs, a);
-    e.max_rel = std::max(e.max_rel, a / (std::fabs(ref[i]) + 1e-4 * mx));
-  }
-  e.n = size_t(count);
-  return e;
+  return error_of(ref, emu, size_t(count));
 }
 
 class MlvqExportScheme : public ::testing::TestWithParam<int> {};
