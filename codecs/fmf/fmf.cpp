@@ -11,6 +11,7 @@
 
 #include "codecs/fmf/fmf_cl.h"
 #include "codecs/fmf/svd.h"
+#include "core/fixed_product.h"
 #include "core/cl_runtime.h"
 #include "core/interp.h"
 
@@ -249,6 +250,7 @@ Status FmfModel::decode(const DecodeRequest& req, Btf& out) const {
   const int nc = m_desc.channels;
   // Gather the U rows of the requested directions, in the output's row order.
   const int nblocks = int(m_blocks.size());
+  // Stored transposed (components x rows): fixed_order_product's right operand.
   std::vector<MatrixXfR> Usub(nblocks);
   const Index rows_per_block = m_cfg.dfmf ? nl * nv : m;
   for (int k = 0; k < nblocks; ++k) {
@@ -262,6 +264,7 @@ Status FmfModel::decode(const DecodeRequest& req, Btf& out) const {
             Usub[k].row(c + nc * (l + nl * v)) = m_blocks[k].U.row(Index(m_desc.row(rr.lights[l], rr.views[v], c)));
         }
       }
+    Usub[k] = Usub[k].transpose().eval();
   }
   // Texel blocks bound the temporary memory; each block is one GEMM per factorized channel.
   // Texel tiles of at most ~16 M temporary floats per channel (64 MB), and buffers reused across
@@ -280,14 +283,20 @@ Status FmfModel::decode(const DecodeRequest& req, Btf& out) const {
       }
     }
     Eigen::Map<MatrixXfR> dst(out.data() + size_t(t0) * size_t(m), nb, m);
+    // fixed_order_product, not a GEMM: a texel's values must not depend on the tile it falls
+    // in, so that band-wise (streamed) decodes equal whole decodes bit for bit.
+    auto product = [&](int k, float* to) {
+      fixed_order_product(sx[k].data(), size_t(nb), size_t(sx[k].cols()), size_t(sx[k].cols()), Usub[k].data(),
+                          size_t(rows_per_block), to, size_t(rows_per_block));
+    };
     if (!m_cfg.dfmf) {
-      dst.noalias() = sx[0] * Usub[0].transpose();
+      product(0, dst.data());
       if (m_cfg.color_model == 12) dst = (dst.array().exp() - k_drr_eps).matrix();  // Bonn FMF dynamic range reduction
       continue;
     }
     for (int k = 0; k < 3; ++k) {
       ch[k].resize(nb, rows_per_block);  // no reallocation when the size is unchanged
-      ch[k].noalias() = sx[k] * Usub[k].transpose();
+      product(k, ch[k].data());
     }
 #pragma omp parallel for schedule(static)
     for (Index i = 0; i < nb; ++i)

@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "codecs/lpyr/lpyr_internal.h"
+#include "core/fixed_product.h"
 
 namespace btfc::lpyr {
 
@@ -129,6 +130,10 @@ Status LpyrModel::decode(const DecodeRequest& req, Btf& out) const {
         }
       }
   }
+  // Transposed once (components x rows) for fixed_order_product: a texel's values must not
+  // depend on the tile it falls in, so that band-wise decodes equal whole decodes bit for bit.
+  MatrixXfR EcatT[3];
+  for (int c = 0; c < 3; ++c) EcatT[c] = Ecat[c].transpose();
   const Index tb = 1024;
   MatrixXfR Dcat, ch[3];
   for (Index t0 = 0; t0 < n; t0 += tb) {
@@ -144,7 +149,9 @@ Status LpyrModel::decode(const DecodeRequest& req, Btf& out) const {
           Dcat.row(i).segment(offset[c][j], lv.ch[c].D.cols()) = float(level_weight(req.lod, k)) * lv.ch[c].D.row(t);
         }
       }
-      ch[c].noalias() = Dcat * Ecat[c].transpose();
+      ch[c].resize(nb, dout);
+      fixed_order_product(Dcat.data(), size_t(nb), size_t(Dcat.cols()), size_t(Dcat.cols()), EcatT[c].data(), size_t(dout),
+                          ch[c].data(), size_t(dout));
       ch[c].rowwise() += mean[c].transpose();
     }
     float* dst = out.data() + size_t(t0) * size_t(3 * dout);
