@@ -186,6 +186,7 @@ Status write_bonn_dfmf(const Model& model, const std::string& path, bool half, c
     return unsupported(path + ": the dfmf model's luminance offset is " + std::to_string(fv.drr_eps) +
                        ", Bonn's colour model 11 fixes it at 1e-5 (readers would decode other values): encode with "
                        "fmf:color=dfmf:offset=1e-5 for a Bonn DFMF, or keep the model as .btfc");
+  int cmax = 0;
   for (const FmfBlockView& b : fv.blocks) cmax = std::max(cmax, b.C);
   ByteSink out(path);
   BTFC_RETURN_IF_ERROR(write_common(out, "!DFMF08FCR", d, meta, true));
