@@ -498,7 +498,9 @@ class FmfCodec final : public Codec {
     }
     stats.add("data_rel_error", best);
     std::unique_ptr<FmfModel> m = hi == ry_max ? std::move(full) : make(hi);
-    for (const Block& b : m->blocks()) stats.add("rank." + b.name, double(b.U.cols()));
+    for (auto& [k, v] : stats.numbers)  // the ranks the model keeps, in place of the maximum ones
+      for (const Block& b : m->blocks())
+        if (k == "rank." + b.name) v = double(b.U.cols());
     return m;
   }
 
