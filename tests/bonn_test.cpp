@@ -232,7 +232,7 @@ Status open_status(const std::string& path) {
 
 TEST(Bonn, DfmfRoundTripFloatIsExact) {
   const Btf btf = synth(6, 5, 9, 4);
-  auto model = encode(btf, "fmf:color=dfmf:rank=5:chroma_rank=3:precision=float");
+  auto model = encode(btf, "fmf:color=dfmf:rank=5:chroma_rank=3:precision=float:offset=1e-5");
   const std::string p = tmp_path("rt_float.btf");
   ASSERT_TRUE(write_bonn_dfmf(*model, p, false).ok());
   BonnInfo info;
@@ -250,7 +250,7 @@ TEST(Bonn, DfmfRoundTripFloatIsExact) {
 
 TEST(Bonn, DfmfRoundTripHalfWithinHalfPrecision) {
   const Btf btf = synth(6, 5, 9, 4);
-  auto model = encode(btf, "fmf:color=dfmf:rank=4:precision=half");
+  auto model = encode(btf, "fmf:color=dfmf:rank=4:precision=half:offset=1e-5");
   const std::string p = tmp_path("rt_half.btf");
   ASSERT_TRUE(write_bonn_dfmf(*model, p, true).ok());
   auto back = open_ok(p);

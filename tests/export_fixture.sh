@@ -28,7 +28,7 @@ export_one() { # NAME SOURCE SPEC [export options]
 }
 
 export_one fmf s fmf:rank=6
-export_one fmf_dfmf s fmf:color=dfmf:rank=6:chroma_rank=3 --direction-map 16
+export_one fmf_dfmf s fmf:color=dfmf:rank=6:chroma_rank=3:offset=1e-5 --direction-map 16
 export_one fmf_float s fmf:rank=6 --float
 export_one fmf_hdr hdr fmf:rank=4:precision=float
 export_one lpyr s lpyr:y=4:c=1

@@ -192,8 +192,8 @@ TEST(GpuTexture, HalfOverflowIsScaledOrClampedAndCounted) {
 TEST(FmfExport, EmulationEqualsModelRgbAndDfmf) {
   const Btf b = synth_ubo(19, 11);
   const double rms = rms_of(b);
-  for (const std::string spec : {"fmf:rank=9", "fmf:color=dfmf:rank=6:chroma_rank=3", "fmf:rank=9:precision=float",
-                                 "fmf:color=dfmf:rank=6:chroma_rank=3:precision=float"}) {
+  for (const std::string spec : {"fmf:rank=9", "fmf:color=dfmf:rank=6:chroma_rank=3:offset=1e-5", "fmf:rank=9:precision=float",
+                                 "fmf:color=dfmf:rank=6:chroma_rank=3:precision=float:offset=1e-5"}) {
     auto m = encode_spec(b, spec);
     ASSERT_TRUE(m);
     const bool half_model = spec.find("precision=float") == std::string::npos;

@@ -207,7 +207,7 @@ TEST(Fmf, HdrRangeSurvivesHalfStorage) {
   }
   double vmax = 0;
   for (size_t i = 0; i < b.size(); ++i) vmax = std::max(vmax, double(b.data()[i]));
-  for (const char* spec : {"fmf:rank=4:precision=half", "fmf:rank=4:color=dfmf:precision=half"}) {
+  for (const char* spec : {"fmf:rank=4:precision=half", "fmf:rank=4:color=dfmf:precision=half:offset=1e-5"}) {
     const bool dfmf = std::string(spec).find("dfmf") != std::string::npos;
     auto mdl = encode(b, spec);
     Btf out;

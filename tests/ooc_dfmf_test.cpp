@@ -94,13 +94,13 @@ TEST(StreamingDfmf, ChannelChunksAreTheInCoreTransform) {
   const size_t rows = b.desc().num_images();
   MemorySource src(b, 7);
   for (int k = 0; k < 3; ++k) {
-    DfmfChannelSource ch(src, k);
+    DfmfChannelSource ch(src, k, 0.25f);
     ASSERT_EQ(ch.rows(), rows);
     std::vector<uint8_t> raw(ch.raw_buffer_bytes(1));
     std::vector<float> got(rows * ch.chunk_count(1)), want(got.size());
     ASSERT_TRUE(ch.load(1, raw.data(), got.data()).ok());
     size_t clamped = 0;
-    for (size_t t = 0; t < ch.chunk_count(1); ++t) clamped += dfmf_channel(b.abrdf(7 + t), rows, k, &want[t * rows]);
+    for (size_t t = 0; t < ch.chunk_count(1); ++t) clamped += dfmf_channel(b.abrdf(7 + t), rows, k, 0.25f, &want[t * rows]);
     EXPECT_EQ(got, want) << "channel " << k;
     EXPECT_EQ(ch.clamped(), k == 0 ? clamped : 0u);
     // read() + decode() give the same values as load().

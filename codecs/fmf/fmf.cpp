@@ -5,6 +5,7 @@
 #include <Imath/half.h>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 
 #include <mutex>
@@ -49,12 +50,13 @@ const YuvFromRgb k_yuv;
 const ParamSpec k_params[] = {
     {"rank", ParamSpec::Type::integer, "32", 1, 4096, {}, "components C kept (upper bound when target_error is set)", true},
     {"chroma_rank", ParamSpec::Type::integer, "0", 0, 4096, {}, "color=dfmf: components of the U and V channels (0 = rank)"},
-    {"target_error", ParamSpec::Type::real, "0", 0, 1, {}, "if > 0: smallest rank whose relative L2 error (of the factorized matrix) is <= this"},
+    {"target_error", ParamSpec::Type::real, "0", 0, 1, {}, "if > 0: smallest rank whose relative L2 error of the data (decoded vs input) is <= this"},
     {"color", ParamSpec::Type::choice, "rgb", 0, 0, {"rgb", "dfmf"}, "rgb: colour in the matrix rows (paper); dfmf: per-channel log-luminance/chroma (Bonn DFMF model 11)"},
     {"svd", ParamSpec::Type::choice, "auto", 0, 0, {"auto", "exact", "randomized"}, "auto: exact when the small side of the matrix is <= 1024, else randomized"},
     {"oversample", ParamSpec::Type::integer, "16", 0, 1024, {}, "randomized SVD: extra sketch columns"},
     {"power_iters", ParamSpec::Type::integer, "4", 0, 32, {}, "randomized SVD: power iterations"},
     {"precision", ParamSpec::Type::choice, "half", 0, 0, {"half", "float"}, "storage of U and SxV"},
+    {"offset", ParamSpec::Type::real, "0", 0, 1e30, {}, "color=dfmf: luminance offset e of Y' = log(Y + e), U' = U / (Y + e); 0 = from the data (sum Y^2 / sum Y); 1e-5 = Bonn's colour model 11 exactly"},
 };
 
 struct Block {
@@ -72,6 +74,8 @@ struct Config {
   // mode's native one (dfmf: 11, rgb: 0); -1 = native. Non-native models decode on the CPU path
   // only and cannot be saved to .btfc.
   int color_model = -1;
+  // color=dfmf: the luminance offset e (Y' = log(Y + e), U' = U / (Y + e)); Bonn's model 11 is 1e-5.
+  float offset = k_drr_eps;
   float color_mean[3] = {0, 0, 0};
   float color_transform[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
 };
@@ -79,7 +83,14 @@ struct Config {
 // Inverse of Bonn colour models other than 11 (BTFLIB undecorrelate.m, formats.md 2.2).
 void bonn_undecorrelate(const Config& cfg, const float* in, float* rgb);
 
-Config config_from(const Params& p) { return {p.get("color") == "dfmf", p.get("precision") == "half"}; }
+// A spec's offset 0 is "from the data" at encode; a model's spec holds the resolved value, so 0
+// there is a file from before the parameter existed: Bonn's 1e-5.
+Config config_from(const Params& p) {
+  Config c{p.get("color") == "dfmf", p.get("precision") == "half"};
+  const double e = p.get_real("offset");
+  c.offset = e > 0 ? float(e) : k_drr_eps;
+  return c;
+}
 
 class FmfModel final : public Model {
  public:
@@ -138,12 +149,15 @@ class FmfModel final : public Model {
  private:
   void undecorrelate(const float* ylog_u_v, float* rgb) const {
     if (m_cfg.color_model >= 0) return bonn_undecorrelate(m_cfg, ylog_u_v, rgb);
-    const float y = std::exp(ylog_u_v[0]) - k_drr_eps;
-    const float yuv[3] = {y, ylog_u_v[1] * (y + k_drr_eps), ylog_u_v[2] * (y + k_drr_eps)};
+    const float e = m_cfg.offset, y = std::exp(ylog_u_v[0]) - e;
+    const float yuv[3] = {y, ylog_u_v[1] * (y + e), ylog_u_v[2] * (y + e)};
     for (int c = 0; c < 3; ++c)
       rgb[c] = k_rgb_from_yuv[c][0] * yuv[0] + k_rgb_from_yuv[c][1] * yuv[1] + k_rgb_from_yuv[c][2] * yuv[2];
   }
 
+  // The OpenCL kernels (kernels/fmf.cl) hard-code Bonn's offset 1e-5: other dfmf offsets decode
+  // on the CPU path.
+  bool native_eps() const { return !m_cfg.dfmf || m_cfg.offset == k_drr_eps; }
   // The factors in the OpenCL kernels' layout (codecs/fmf/fmf_cl.h), uploaded on first use.
   Result<std::shared_ptr<fmf_cl::DeviceFactors>> device_factors() const;
   fmf_cl::PackedFactors packed() const;
@@ -198,7 +212,7 @@ Status FmfModel::decode_cl(const ResolvedRequest& rr, Btf& out) const {
 }
 
 Status FmfModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
-  if (m_desc.channels != 3 || m_cfg.color_model >= 0 || !ocl::use_opencl()) return Model::eval_batch(q, out);
+  if (m_desc.channels != 3 || m_cfg.color_model >= 0 || !native_eps() || !ocl::use_opencl()) return Model::eval_batch(q, out);
   // Validate through the reference path's checks, then convert to the kernel's query layout:
   // directions become 3 + 3 (index, weight) pairs (the renderer's index / weight textures).
   std::vector<btfc_fmf_query> kq(q.size());
@@ -240,7 +254,7 @@ Status FmfModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
 Status FmfModel::decode(const DecodeRequest& req, Btf& out) const {
   BTFC_ASSIGN_OR_RETURN(ResolvedRequest rr, resolve_request(m_desc, req));
   BTFC_RETURN_IF_ERROR(prepare_output(rr.desc, out));
-  if (m_desc.channels == 3 && m_cfg.color_model < 0 && ocl::use_opencl()) {
+  if (m_desc.channels == 3 && m_cfg.color_model < 0 && native_eps() && ocl::use_opencl()) {
     Status s = decode_cl(rr, out);
     if (s.ok() || !ocl::fall_back_after(s)) return s;
   }
@@ -396,24 +410,40 @@ class FmfCodec final : public Codec {
 
     std::vector<Block> blocks;
     ModelStats stats;
+    // dfmf with target_error: the target is the data's error, which no channel's SVD knows; the
+    // channels are factorized at their maximum ranks and truncated afterwards (dfmf_truncate_to_target).
+    const bool dfmf_target = cfg.dfmf && opt.target_rel_error > 0;
     auto factor = [&](const std::string& name, const float* B, size_t rows, int max_rank) -> Status {
       opt.max_rank = max_rank;
-      BTFC_ASSIGN_OR_RETURN(fmf::SvdResult r, fmf::truncated_svd(B, rows, d.num_texels(), opt));
-      blocks.push_back(block_from_svd(name, std::move(r), cfg.half, max_rank, opt.target_rel_error, stats));
+      fmf::SvdOptions o = opt;
+      if (dfmf_target) o.target_rel_error = 0;
+      BTFC_ASSIGN_OR_RETURN(fmf::SvdResult r, fmf::truncated_svd(B, rows, d.num_texels(), o));
+      blocks.push_back(block_from_svd(name, std::move(r), cfg.half, max_rank, o.target_rel_error, stats));
       return {};
     };
+    Params rp = p;
     if (!cfg.dfmf) {
       // The Btf buffer is B (rows = (view, light, colour), columns = texels), column-major.
       BTFC_RETURN_IF_ERROR(factor("rgb", btf.data(), d.abrdf_size(), rank));
     } else {
-      // One decorrelated channel matrix at a time keeps peak memory at input + 1/3 input.
       const size_t rows = d.num_images(), n = d.num_texels();
+      double e = p.get_real("offset");
+      if (e <= 0) {
+        double sy = 0, sy2 = 0;
+#pragma omp parallel for reduction(+ : sy, sy2) schedule(static)
+        for (size_t t = 0; t < n; ++t) dfmf_luminance_moments(btf.abrdf(t), rows, &sy, &sy2);
+        e = dfmf_auto_offset(sy, sy2);
+      }
+      BTFC_ASSIGN_OR_RETURN(rp, dfmf_with_offset(p, e));
+      const float offset = config_from(rp).offset;
+      stats.add("dfmf_offset", offset);
+      // One decorrelated channel matrix at a time keeps peak memory at input + 1/3 input.
       std::vector<float> ch(rows * n);
       size_t clamped = 0;
       for (int k = 0; k < 3; ++k) {
 #pragma omp parallel for reduction(+ : clamped) schedule(static)
         for (size_t t = 0; t < n; ++t) {
-          const size_t c = dfmf_channel(btf.abrdf(t), rows, k, &ch[t * rows]);
+          const size_t c = dfmf_channel(btf.abrdf(t), rows, k, offset, &ch[t * rows]);
           if (k == 0) clamped += c;  // the same values clamp in every channel: count them once
         }
         static const char* names[3] = {"y", "u", "v"};
@@ -421,10 +451,66 @@ class FmfCodec final : public Codec {
       }
       stats.add("negative_luminance_clamped", double(clamped));
     }
+    auto model = std::make_unique<FmfModel>(d, rp.canonical(), config_from(rp), std::move(blocks));
+    if (dfmf_target) {
+      BTFC_ASSIGN_OR_RETURN(model, truncate_to_target(btf, std::move(model), opt.target_rel_error, stats));
+    }
     stats.add("encode_seconds", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-    auto model = std::make_unique<FmfModel>(d, p.canonical(), cfg, std::move(blocks));
     model->mutable_stats() = std::move(stats);
     return std::unique_ptr<Model>(std::move(model));
+  }
+
+  // color=dfmf target_error: the smallest luminance rank ry (chroma ranks scaled alike,
+  // ceil(ry * chroma / rank)) whose decoded BTF has a relative L2 error <= target against the
+  // input, by bisection over ry (the error falls with the rank on the data this was measured on;
+  // each probe decodes the whole BTF). The full-rank model when even it misses the target (noted).
+  static Result<std::unique_ptr<FmfModel>> truncate_to_target(const Btf& btf, std::unique_ptr<FmfModel> full, double target,
+                                                               ModelStats& stats) {
+    const std::vector<Block>& fb = full->blocks();
+    const int ry_max = int(fb[0].U.cols()), rc_max = int(std::max(fb[1].U.cols(), fb[2].U.cols()));
+    double norm2 = 0;
+    for (size_t i = 0; i < btf.size(); ++i) norm2 += double(btf.data()[i]) * btf.data()[i];
+    auto make = [&](int ry) {
+      const int rc = std::max(1, int(std::ceil(double(ry) * rc_max / ry_max)));
+      std::vector<Block> bs;
+      for (size_t k = 0; k < 3; ++k) {
+        const Block& b = fb[k];
+        const Index c = std::min<Index>(b.U.cols(), k == 0 ? ry : rc);
+        bs.push_back({b.name, b.U.leftCols(c), b.SxV.leftCols(c), b.S.head(c), b.scale.head(c)});
+      }
+      return std::make_unique<FmfModel>(full->desc(), full->spec(), full->config(), std::move(bs));
+    };
+    auto error_of = [&](const FmfModel& m) -> Result<double> {
+      Btf dec;
+      BTFC_RETURN_IF_ERROR(m.decode_all(dec));
+      double e2 = 0;
+#pragma omp parallel for reduction(+ : e2) schedule(static)
+      for (size_t i = 0; i < btf.size(); ++i) {
+        const double df = double(dec.data()[i]) - btf.data()[i];
+        e2 += df * df;
+      }
+      return norm2 > 0 ? std::sqrt(e2 / norm2) : std::sqrt(e2);
+    };
+    BTFC_ASSIGN_OR_RETURN(double err_hi, error_of(*full));
+    if (err_hi > target) {
+      stats.note("target.data", "target_error " + std::to_string(target) + " not reached: the maximum ranks give " + std::to_string(err_hi));
+      stats.add("data_rel_error", err_hi);
+      return full;
+    }
+    int lo = 0, hi = ry_max;  // invariant: hi meets the target, lo does not (0 = none tried)
+    double best = err_hi;
+    while (hi - lo > 1) {
+      const int mid = lo + (hi - lo) / 2;
+      BTFC_ASSIGN_OR_RETURN(double e, error_of(*make(mid)));
+      if (e <= target) hi = mid, best = e;
+      else lo = mid;
+    }
+    stats.add("data_rel_error", best);
+    std::unique_ptr<FmfModel> m = hi == ry_max ? std::move(full) : make(hi);
+    for (auto& [k, v] : stats.numbers)  // the ranks the model keeps, in place of the maximum ones
+      for (const Block& b : m->blocks())
+        if (k == "rank." + b.name) v = double(b.U.cols());
+    return m;
   }
 
   Result<std::unique_ptr<Model>> load(const ContainerReader& rd) const override {
@@ -580,16 +666,45 @@ Result<std::unique_ptr<Model>> make_fmf_model(const BtfDesc& desc, int cm, std::
   return std::unique_ptr<Model>(std::move(model));
 }
 
-size_t dfmf_channel(const float* abrdf, size_t rows, int k, float* out) {
+size_t dfmf_channel(const float* abrdf, size_t rows, int k, float offset, float* out) {
   size_t clamped = 0;
   for (size_t r = 0; r < rows; ++r) {
     const float* rgb = abrdf + 3 * r;
     float y = k_yuv.m[0][0] * rgb[0] + k_yuv.m[0][1] * rgb[1] + k_yuv.m[0][2] * rgb[2];
     if (y < 0) y = 0, ++clamped;
-    if (k > 0) out[r] = (k_yuv.m[k][0] * rgb[0] + k_yuv.m[k][1] * rgb[1] + k_yuv.m[k][2] * rgb[2]) / (y + k_drr_eps);
-    else out[r] = std::log(y + k_drr_eps);
+    if (k > 0) out[r] = (k_yuv.m[k][0] * rgb[0] + k_yuv.m[k][1] * rgb[1] + k_yuv.m[k][2] * rgb[2]) / (y + offset);
+    else out[r] = std::log(y + offset);
   }
   return clamped;
+}
+
+void dfmf_luminance_moments(const float* abrdf, size_t rows, double* sum_y, double* sum_y2) {
+  double s = 0, s2 = 0;
+  for (size_t r = 0; r < rows; ++r) {
+    const float* rgb = abrdf + 3 * r;
+    const double y = std::max(0.0f, k_yuv.m[0][0] * rgb[0] + k_yuv.m[0][1] * rgb[1] + k_yuv.m[0][2] * rgb[2]);
+    s += y, s2 += y * y;
+  }
+  *sum_y += s, *sum_y2 += s2;
+}
+
+double dfmf_auto_offset(double sum_y, double sum_y2) {
+  const double e = sum_y > 0 ? sum_y2 / sum_y : 0;
+  return std::isfinite(e) && e > k_drr_eps ? e : k_drr_eps;
+}
+
+Result<Params> dfmf_with_offset(const Params& p, double offset) {
+  BTFC_ASSIGN_OR_RETURN(SpecString spec, parse_spec_string(p.canonical()));
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.9g", offset);
+  bool placed = false;
+  for (auto& [k, v] : spec.values)
+    if (k == "offset") v = buf, placed = true;
+  if (!placed) spec.values.emplace_back("offset", buf);
+  std::string text = spec.codec;
+  for (const auto& [k, v] : spec.values) text += ":" + k + "=" + v;
+  BTFC_ASSIGN_OR_RETURN(SpecString again, parse_spec_string(text));
+  return bind_params(again, k_params);
 }
 
 namespace {
@@ -643,6 +758,7 @@ Result<FmfFactorsView> fmf_factors(const Model& model) {
   v.per_channel = cfg.dfmf;
   v.bonn_color_model = cfg.color_model >= 0 ? cfg.color_model : (cfg.dfmf ? 11 : 0);
   v.half = cfg.half;
+  v.drr_eps = cfg.dfmf ? cfg.offset : k_drr_eps;
   for (int i = 0; i < 3; ++i) {
     v.color_mean[i] = cfg.color_mean[i];
     for (int j = 0; j < 3; ++j) v.color_transform[i][j] = cfg.color_transform[i][j];

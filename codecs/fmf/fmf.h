@@ -10,12 +10,26 @@
 // Colour (`color=`):
 //   rgb  - colour inside the matrix rows, as in the paper: one factorization of the
 //          (view, light, colour) x texel matrix; the matrix is the Btf buffer itself (no copy).
-//   dfmf - per-channel decorrelated factorization as Bonn's DFMF colour model 11
-//          (formats.md 2.2, "Ylog_UdivY_VdivY"): YUV, then Y' = log(Y + eps), U' = U / (Y + eps),
-//          V' = V / (Y + eps) with eps = 1e-5; each of Y', U', V' is factorized separately
-//          ((view, light) x texel), Y' with `rank` and the chroma with `chroma_rank` components.
-//          Decoding inverts exactly that. Handles HDR dynamic range well (log luminance).
-//          Negative luminance (noise in HDR data) is clamped to 0 and counted in the stats.
+//   dfmf - per-channel decorrelated factorization in the form of Bonn's DFMF colour model 11
+//          (formats.md 2.2, "Ylog_UdivY_VdivY"): YUV, then Y' = log(Y + e), U' = U / (Y + e),
+//          V' = V / (Y + e); each of Y', U', V' is factorized separately ((view, light) x
+//          texel), Y' with `rank` and the chroma with `chroma_rank` components. Decoding
+//          inverts exactly that. Negative luminance (HDR noise) is clamped to 0 (counted).
+//          The offset e (`offset`; 0 = from the data): Bonn fixes e = 1e-5, which makes the
+//          SVD's objective the error of log(Y) down to 1e-5: on HDR data it spends the rank on
+//          the logarithms of near-black values and lets the highlights, which hold the data's
+//          energy, carry log errors that exp() turns into errors of the size of the data
+//          (docs/benchmarks.md, "dfmf on HDR data"). A factorization error d of Y' or U' costs
+//          (Y + e) d in the data, so e sets where the model is relative (Y >> e, log-like) and
+//          where absolute (Y << e). The default e = sum Y^2 / sum Y (the energy-weighted mean
+//          luminance) puts the bright values that hold the L2 energy on the absolute side; it
+//          scales with the data (a BTF times s gives the same model, offset times s). The model's
+//          spec holds the resolved e. Only e = 1e-5 is Bonn's colour model 11 exactly: the Bonn
+//          DFMF writer and the OpenCL kernels take those models only (other offsets decode on
+//          the CPU path; write them as .btfc).
+//          target_error is the relative L2 error of the decoded data against the input: the
+//          channels are factorized at rank / chroma_rank, then truncated to the smallest luminance
+//          rank (chroma ranks scaled alike) that meets it (in core only).
 //
 // Storage per factorized block b ("rgb" or "y", "u", "v"):
 //   U.<b>     [rows, C]   f16 or f32   eigen-ABRDFs, orthonormal columns (|entry| <= 1)
@@ -71,6 +85,7 @@ struct FmfFactorsView {
   bool per_channel = false;  // true: blocks y,u,v (DFMF layout); false: one "rgb" block (FMF layout)
   int bonn_color_model = 0;  // 11 for color=dfmf, 0 for color=rgb; as given to make_fmf_model otherwise
   bool half = true;
+  float drr_eps = 1e-5f;     // the luminance offset e of color=dfmf (Bonn's model 11: 1e-5)
   float color_mean[3] = {0, 0, 0};
   float color_transform[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
   std::vector<FmfBlockView> blocks;
@@ -89,11 +104,18 @@ Result<std::unique_ptr<Model>> make_dfmf_model_from_svd(const BtfDesc& desc, con
                                                         fmf::SvdResult v, ModelStats stats);
 
 // color=dfmf's colour transform of one texel: from its ABRDF `abrdf` (rows = num_images RGB
-// triples, the Btf layout) writes channel k (0: Y' = log(Y + eps), 1: U' = U / (Y + eps),
-// 2: V' = V / (Y + eps); YUV of Bonn's colour model 11, eps = 1e-5) to out[0, rows). Negative
+// triples, the Btf layout) writes channel k (0: Y' = log(Y + e), 1: U' = U / (Y + e),
+// 2: V' = V / (Y + e); YUV of Bonn's colour model 11, e = `offset`) to out[0, rows). Negative
 // luminance (HDR noise) is clamped to 0; returns how many of the rows were clamped (the same for
 // every k). The one definition both the in-core encode and the streamed one (ooc_dfmf.h) use,
 // so the two factorize the same matrices.
-size_t dfmf_channel(const float* abrdf, size_t rows, int k, float* out);
+size_t dfmf_channel(const float* abrdf, size_t rows, int k, float offset, float* out);
+// The automatic offset (offset=0): adds one texel's sum of Y and of Y^2 (Y clamped to >= 0) to
+// *sum_y, *sum_y2; dfmf_auto_offset turns the BTF's sums into e = sum Y^2 / sum Y (1e-5 when
+// that is smaller or undefined). The streamed encode sums the same way over its chunks.
+void dfmf_luminance_moments(const float* abrdf, size_t rows, double* sum_y, double* sum_y2);
+double dfmf_auto_offset(double sum_y, double sum_y2);
+// `p` (a color=dfmf fmf spec) with offset = `offset`: the spec a model of that offset carries.
+Result<Params> dfmf_with_offset(const Params& p, double offset);
 
 }  // namespace btfc

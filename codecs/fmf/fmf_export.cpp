@@ -187,6 +187,9 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
   L.mode = fv.per_channel ? 11 : fv.bonn_color_model;
   if ((fv.per_channel && fv.bonn_color_model != 11) || (!fv.per_channel && L.mode != 0 && L.mode != 12))
     return unsupported("export: fmf colour model " + std::to_string(fv.bonn_color_model) + " has no shader (rgb and dfmf only)");
+  if (fv.per_channel && fv.drr_eps != 1e-5f)
+    return unsupported("export: the dfmf model's luminance offset is " + std::to_string(fv.drr_eps) +
+                       "; the shaders decode Bonn's colour model 11 (offset 1e-5) only: encode with fmf:color=dfmf:offset=1e-5");
   L.nb = int(fv.blocks.size());
 
   const SceneCut cut = scene_cut(fv, d, opt);
@@ -312,6 +315,9 @@ Result<std::unique_ptr<Model>> fmf_scene_model(const Model& model, const ExportO
   const BtfDesc& d = model.desc();
   if ((fv.per_channel && fv.bonn_color_model != 11) || (!fv.per_channel && fv.bonn_color_model != 0 && fv.bonn_color_model != 12))
     return unsupported("export: fmf colour model " + std::to_string(fv.bonn_color_model) + " has no scene model (rgb and dfmf only)");
+  if (fv.per_channel && fv.drr_eps != 1e-5f)
+    return unsupported("export: the dfmf model's luminance offset is " + std::to_string(fv.drr_eps) +
+                       "; the shaders decode Bonn's colour model 11 (offset 1e-5) only: encode with fmf:color=dfmf:offset=1e-5");
   const SceneCut cut = scene_cut(fv, d, opt);
   BtfDesc sd = d;
   sd.lights.dirs.clear(), sd.views.dirs.clear();

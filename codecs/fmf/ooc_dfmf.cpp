@@ -5,8 +5,8 @@
 
 namespace btfc {
 
-DfmfChannelSource::DfmfChannelSource(const fmf::ChunkSource& base, int k)
-    : m_base(base), m_k(k), m_clamped(new std::atomic<uint64_t>[base.num_chunks()]) {
+DfmfChannelSource::DfmfChannelSource(const fmf::ChunkSource& base, int k, float offset)
+    : m_base(base), m_k(k), m_offset(offset), m_clamped(new std::atomic<uint64_t>[base.num_chunks()]) {
   for (size_t c = 0; c < base.num_chunks(); ++c) m_clamped[c] = 0;
 }
 
@@ -22,7 +22,7 @@ Status DfmfChannelSource::transform(size_t c, const float* b, float* dst) const 
   const size_t rows = this->rows(), in_rows = m_base.rows(), count = chunk_count(c);
   if (in_rows != 3 * rows) return invalid_argument("color=dfmf needs 3 channels: the BTF matrix has " + std::to_string(in_rows) + " rows");
   uint64_t clamped = 0;
-  for (size_t t = 0; t < count; ++t) clamped += dfmf_channel(b + t * in_rows, rows, m_k, dst + t * rows);
+  for (size_t t = 0; t < count; ++t) clamped += dfmf_channel(b + t * in_rows, rows, m_k, m_offset, dst + t * rows);
   if (m_k == 0) m_clamped[c] = clamped;
   return {};
 }
@@ -45,6 +45,41 @@ Status DfmfChannelSource::load(size_t c, void* raw, float* dst) const {
   uint8_t* base_raw = static_cast<uint8_t*>(raw) + scratch_bytes(m_base.rows() * chunk_count(c));
   BTFC_RETURN_IF_ERROR(m_base.load(c, m_base.raw_buffer_bytes(c) ? base_raw : nullptr, scratch));
   return transform(c, scratch, dst);
+}
+
+Status DfmfChannelSource::luminance_moments(const fmf::ChunkSource& base, const std::vector<size_t>& chunks, fmf::Collective& coll,
+                                            double* sum_y, double* sum_y2) {
+  const size_t in_rows = base.rows();
+  double sums[2] = {0, 0};
+  Status local;
+  if (in_rows % 3 != 0) local = invalid_argument("color=dfmf needs 3 channels: the BTF matrix has " + std::to_string(in_rows) + " rows");
+  std::vector<float> values;
+  std::vector<uint8_t> raw;
+  for (size_t i = 0; i < chunks.size() && local.ok(); ++i) {
+    const size_t c = chunks[i], count = base.chunk_count(c);
+    const float* b = nullptr;
+    if (base.mappable()) {
+      auto m = base.map(c);
+      if (!m.ok()) {
+        local = m.status();
+        break;
+      }
+      b = m.value();
+    } else {
+      values.resize(in_rows * count);
+      raw.resize(base.raw_buffer_bytes(c));
+      local = base.load(c, raw.empty() ? nullptr : raw.data(), values.data());
+      if (!local.ok()) break;
+      b = values.data();
+    }
+    for (size_t t = 0; t < count; ++t) dfmf_luminance_moments(b + t * in_rows, in_rows / 3, &sums[0], &sums[1]);
+    if (base.mappable()) base.unmap(c, b);
+  }
+  // Every process joins the sum, then all agree on the first failure (no process waits alone).
+  BTFC_RETURN_IF_ERROR(coll.allreduce_sum(sums, 2));
+  BTFC_RETURN_IF_ERROR(coll.agree(local));
+  *sum_y = sums[0], *sum_y2 = sums[1];
+  return {};
 }
 
 uint64_t DfmfChannelSource::clamped() const {

@@ -23,8 +23,9 @@ namespace btfc {
 
 class DfmfChannelSource final : public fmf::ChunkSource {
  public:
-  // Channel k (0: Y', 1: U', 2: V') of `base`, whose rows must be a multiple of 3.
-  DfmfChannelSource(const fmf::ChunkSource& base, int k);
+  // Channel k (0: Y', 1: U', 2: V') of `base` with luminance offset `offset` (fmf.h), whose
+  // rows must be a multiple of 3.
+  DfmfChannelSource(const fmf::ChunkSource& base, int k, float offset);
   size_t rows() const override { return m_base.rows() / 3; }
   size_t num_chunks() const override { return m_base.num_chunks(); }
   size_t chunk_first(size_t c) const override { return m_base.chunk_first(c); }
@@ -44,12 +45,18 @@ class DfmfChannelSource final : public fmf::ChunkSource {
   // often it was loaded (channel 0 only counts; the other channels clamp the same values).
   uint64_t clamped() const;
 
+  // The automatic offset's sums (dfmf_luminance_moments, fmf.h) over `chunks` of `base`, summed
+  // over the processes of `coll`: one extra pass before the factorizations (offset=0 only).
+  static Status luminance_moments(const fmf::ChunkSource& base, const std::vector<size_t>& chunks, fmf::Collective& coll,
+                                  double* sum_y, double* sum_y2);
+
  private:
   Status transform(size_t c, const float* base_chunk, float* dst) const;
   static size_t scratch_bytes(size_t values);
 
   const fmf::ChunkSource& m_base;
   int m_k;
+  float m_offset;
   std::unique_ptr<std::atomic<uint64_t>[]> m_clamped;  // per chunk; set (not added) by every load
 };
 

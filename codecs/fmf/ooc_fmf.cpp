@@ -2,6 +2,7 @@
 #include "codecs/fmf/ooc_fmf.h"
 
 #include <algorithm>
+#include <chrono>
 
 #include "codecs/fmf/fmf.h"
 #include "codecs/fmf/ooc_dfmf.h"
@@ -102,12 +103,29 @@ Result<StreamedEncode> encode_fmf_streamed(const fmf::ChunkSource& src, const Bt
   const int rank = int(p.get_int("rank")), chroma = int(p.get_int("chroma_rank"));
   std::vector<fmf::SvdResult> rs;
   double clamped = 0;
+  Params rp = p;  // dfmf: with the resolved offset (the model's spec)
+  float offset = 0;
+  double offset_seconds = 0;
+  if (plan.dfmf) {
+    double e = p.get_real("offset");
+    if (e <= 0) {
+      const auto t0 = std::chrono::steady_clock::now();
+      double sy = 0, sy2 = 0;
+      BTFC_RETURN_IF_ERROR(DfmfChannelSource::luminance_moments(src, out.chunks, coll, &sy, &sy2));
+      e = dfmf_auto_offset(sy, sy2);
+      offset_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    }
+    BTFC_ASSIGN_OR_RETURN(rp, dfmf_with_offset(p, e));
+    offset = float(rp.get_real("offset"));
+    if (opt.target_rel_error > 0)
+      return unsupported("fmf: color=dfmf with target_error (the error of the decoded data) needs the BTF in memory; raise --max-memory or set rank");
+  }
   if (!plan.dfmf) {
     BTFC_ASSIGN_OR_RETURN(fmf::SvdResult r, factor(src, rank));
     rs.push_back(std::move(r));
   } else {
     for (int k = 0; k < 3; ++k) {
-      const DfmfChannelSource channel(src, k);
+      const DfmfChannelSource channel(src, k, offset);
       BTFC_ASSIGN_OR_RETURN(fmf::SvdResult r, factor(channel, k == 0 ? rank : (chroma ? chroma : rank)));
       rs.push_back(std::move(r));
       if (k == 0) clamped = double(channel.clamped());
@@ -117,7 +135,11 @@ Result<StreamedEncode> encode_fmf_streamed(const fmf::ChunkSource& src, const Bt
   }
   if (coll.rank() != 0) return out;
   ModelStats stats;
-  if (plan.dfmf) stats.add("negative_luminance_clamped", clamped);
+  if (plan.dfmf) {
+    stats.add("negative_luminance_clamped", clamped);
+    stats.add("dfmf_offset", offset);
+    if (offset_seconds > 0) stats.add("stream.offset_pass_seconds", offset_seconds);
+  }
   if (!plan.note.empty()) stats.note("stream.svd", plan.note);
   stats.add("stream.passes", out.stats.passes);
   stats.add("stream.processes", coll.size());
@@ -128,7 +150,7 @@ Result<StreamedEncode> encode_fmf_streamed(const fmf::ChunkSource& src, const Bt
   for (double s : out.stats.pass_seconds) total += s;
   stats.add("stream.pass_seconds", total);
   stats.add("stream.reduce_seconds", out.stats.reduce_seconds);
-  auto model = plan.dfmf ? make_dfmf_model_from_svd(desc, p, std::move(rs[0]), std::move(rs[1]), std::move(rs[2]), std::move(stats))
+  auto model = plan.dfmf ? make_dfmf_model_from_svd(desc, rp, std::move(rs[0]), std::move(rs[1]), std::move(rs[2]), std::move(stats))
                          : make_fmf_model_from_svd(desc, p, std::move(rs[0]), std::move(stats));
   if (!model.ok()) return model.status();
   out.model = std::move(model).value();
