@@ -26,21 +26,22 @@ inline float mlvq_dot(__global const float* a, __global const float* b, int n) {
   return s;
 }
 
-/* xm: 5 floats per candidate (sum x, sum x^2, peak, sum xc, sum xc^2); em: 4 per entry. */
+/* xm: 5 floats per candidate (sum x, sum x^2, peak, sum xc, sum xc^2); em: 4 per entry. The score
+   is the margin over the thresholds: min(lum SSIM - tl, chroma SSIM - tc) over the parts present. */
 __kernel void mlvq_ssim_search(__global const float* Xl, __global const float* Xc, __global const float* El,
                                __global const float* Ec, __global const float* xm, __global const float* em, int B, int K,
-                               int dl, int dc, __global int* best, __global float* best_sim, __global float* best_scale) {
+                               int dl, int dc, float tl, float tc, __global int* best, __global float* best_sim, __global float* best_scale) {
   int i = get_global_id(0);
   if (i >= B) return;
   __global const float* m = xm + 5 * i;
-  float bs = -2.0f, bsc = 1.0f;
+  float bs = -3.0f, bsc = 1.0f;
   int bj = -1;
   for (int j = 0; j < K; ++j) {
     __global const float* e = em + 4 * j;
     float s = 2.0f, sc = 1.0f, unused;
-    if (dl > 0) s = mlvq_ssim((float)dl, m[0], m[1], e[0], e[1], mlvq_dot(Xl + (size_t)i * dl, El + (size_t)j * dl, dl), m[2], 1, &sc);
+    if (dl > 0) s = mlvq_ssim((float)dl, m[0], m[1], e[0], e[1], mlvq_dot(Xl + (size_t)i * dl, El + (size_t)j * dl, dl), m[2], 1, &sc) - tl;
     if (dc > 0 && s > bs)
-      s = fmin(s, mlvq_ssim((float)dc, m[3], m[4], e[2], e[3], mlvq_dot(Xc + (size_t)i * dc, Ec + (size_t)j * dc, dc), 1.0f, 0, &unused));
+      s = fmin(s, mlvq_ssim((float)dc, m[3], m[4], e[2], e[3], mlvq_dot(Xc + (size_t)i * dc, Ec + (size_t)j * dc, dc), 1.0f, 0, &unused) - tc);
     if (s > bs) {
       bs = s;
       bj = j;

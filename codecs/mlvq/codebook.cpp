@@ -89,8 +89,10 @@ struct PassOut {
 };
 
 // One leader pass of part `part` at `level` over `cand` (see the file comment).
-PassOut leader_pass(const Btf& btf, const ResamplePlan& plan, int level, Part part, const std::vector<Origin>& cand, double thr,
-                    bool cl_search) {
+// Similarity of a candidate to an entry is its margin over the thresholds: min(lum SSIM - thr_l,
+// chroma SSIM - thr_c) over the parts present; an entry is reused when the best margin is >= 0.
+PassOut leader_pass(const Btf& btf, const ResamplePlan& plan, int level, Part part, const std::vector<Origin>& cand, double thr_l,
+                    double thr_c, bool cl_search) {
   const size_t len = plan.grid.slice_len(level);
   const int dl = part != k_chroma ? int(len) : 0, dc = part != k_lum ? int(2 * len) : 0;
   const size_t d = size_t(dl + dc);
@@ -129,10 +131,10 @@ PassOut leader_pass(const Btf& btf, const ResamplePlan& plan, int level, Part pa
     }
     const size_t K0 = K;
     best.assign(B, -1);
-    best_sim.assign(B, -2);
+    best_sim.assign(B, -3);
     best_scale.assign(B, 1);
     if (K0 > 0 && cl_search) {
-      SearchProblem sp{int(B), int(K0), dl, dc, Xl.data(), Xc.data(), El.data(), Ec.data(), xm.data(), em.data()};
+      SearchProblem sp{int(B), int(K0), dl, dc, Xl.data(), Xc.data(), El.data(), Ec.data(), xm.data(), em.data(), float(thr_l), float(thr_c)};
       SearchResult sr;
       const Status st = ssim_search_cl(sp, sr);
       if (st.ok()) {
@@ -147,13 +149,14 @@ PassOut leader_pass(const Btf& btf, const ResamplePlan& plan, int level, Part pa
 #pragma omp parallel for schedule(dynamic, 16)
       for (size_t i = 0; i < B; ++i) {
         const double* m = &xm[5 * i];
-        double bs = -2, bsc = 1;
+        double bs = -3, bsc = 1;
         int bj = -1;
         for (size_t j = 0; j < K0; ++j) {
           const double* e = &em[4 * j];
           double s = 2, sc = 1;
-          if (dl) s = ssim_from_moments(dl, m[0], m[1], e[0], e[1], Gl(Eigen::Index(i), Eigen::Index(j)), m[2], true, &sc);
-          if (dc && s > bs) s = std::min(s, ssim_from_moments(dc, m[3], m[4], e[2], e[3], Gc(Eigen::Index(i), Eigen::Index(j)), 1.0, false, nullptr));
+          if (dl) s = ssim_from_moments(dl, m[0], m[1], e[0], e[1], Gl(Eigen::Index(i), Eigen::Index(j)), m[2], true, &sc) - thr_l;
+          if (dc && s > bs)
+            s = std::min(s, ssim_from_moments(dc, m[3], m[4], e[2], e[3], Gc(Eigen::Index(i), Eigen::Index(j)), 1.0, false, nullptr) - thr_c);
           if (s > bs) bs = s, bj = int(j), bsc = sc;
         }
         best[i] = bj, best_sim[i] = bs, best_scale[i] = bsc;
@@ -170,7 +173,7 @@ PassOut leader_pass(const Btf& btf, const ResamplePlan& plan, int level, Part pa
       }
       double bs = best_sim[i], bsc = best_scale[i];
       int bj = best[i];
-      if (bs < thr) {
+      if (bs < 0) {
         for (size_t j = K0; j < K; ++j) {
           const double* e = &em[4 * j];
           double s = 2, sc = 1;
@@ -179,19 +182,19 @@ PassOut leader_pass(const Btf& btf, const ResamplePlan& plan, int level, Part pa
             const float* a = Xl.row(Eigen::Index(i)).data();
             const float* b = &El[j * size_t(dl)];
             for (int k = 0; k < dl; ++k) dot += double(a[k]) * b[k];
-            s = ssim_from_moments(dl, m[0], m[1], e[0], e[1], dot, m[2], true, &sc);
+            s = ssim_from_moments(dl, m[0], m[1], e[0], e[1], dot, m[2], true, &sc) - thr_l;
           }
           if (dc && s > bs) {
             double dot = 0;
             const float* a = Xc.row(Eigen::Index(i)).data();
             const float* b = &Ec[j * size_t(dc)];
             for (int k = 0; k < dc; ++k) dot += double(a[k]) * b[k];
-            s = std::min(s, ssim_from_moments(dc, m[3], m[4], e[2], e[3], dot, 1.0, false, nullptr));
+            s = std::min(s, ssim_from_moments(dc, m[3], m[4], e[2], e[3], dot, 1.0, false, nullptr) - thr_c);
           }
           if (s > bs) bs = s, bj = int(j), bsc = sc;
         }
       }
-      if (bs >= thr && bj >= 0) {
+      if (bs >= 0 && bj >= 0) {
         out.idx[ci] = uint32_t(bj);
         out.scale[ci] = part == k_chroma ? 1.f : float(bsc);
         continue;
@@ -276,7 +279,7 @@ Result<Hierarchy> encode_hierarchy(const Btf& btf, const EncodeOptions& o, Encod
   std::vector<uint32_t>* pidx = &h.texel_idx;
   std::vector<float>* pscale = &h.texel_scale;
   for (int k = 4; k > s; --k) {
-    PassOut po = leader_pass(btf, plan, k, k_rgb, cand, o.thr[k], o.cl_search);
+    PassOut po = leader_pass(btf, plan, k, k_rgb, cand, o.thr[k], o.thr_chroma[k], o.cl_search);
     *pidx = std::move(po.idx);
     *pscale = std::move(po.scale);
     Book& b = h.rgb[k];
@@ -289,8 +292,8 @@ Result<Hierarchy> encode_hierarchy(const Btf& btf, const EncodeOptions& o, Encod
   }
   // The split level: luminance and chromaticity codebooks, merged pairwise by M.
   {
-    PassOut pl = leader_pass(btf, plan, s, k_lum, cand, o.thr[s], o.cl_search);
-    PassOut pc = leader_pass(btf, plan, s, k_chroma, cand, o.thr[s], o.cl_search);
+    PassOut pl = leader_pass(btf, plan, s, k_lum, cand, o.thr[s], o.thr_chroma[s], o.cl_search);
+    PassOut pc = leader_pass(btf, plan, s, k_chroma, cand, o.thr[s], o.thr_chroma[s], o.cl_search);
     std::unordered_map<uint64_t, uint32_t> pairs;
     pidx->resize(cand.size());
     for (size_t i = 0; i < cand.size(); ++i) {
@@ -308,8 +311,8 @@ Result<Hierarchy> encode_hierarchy(const Btf& btf, const EncodeOptions& o, Encod
   for (int k = s; k >= 1; --k) {
     h.lum[k].n = h.chroma[k].n = uint32_t(g.n(k));
     if (k == 1) break;
-    PassOut pl = leader_pass(btf, plan, k - 1, k_lum, children(org_lum[k], g, k), o.thr[k - 1], o.cl_search);
-    PassOut pc = leader_pass(btf, plan, k - 1, k_chroma, children(org_chroma[k], g, k), o.thr[k - 1], o.cl_search);
+    PassOut pl = leader_pass(btf, plan, k - 1, k_lum, children(org_lum[k], g, k), o.thr[k - 1], o.thr_chroma[k - 1], o.cl_search);
+    PassOut pc = leader_pass(btf, plan, k - 1, k_chroma, children(org_chroma[k], g, k), o.thr[k - 1], o.thr_chroma[k - 1], o.cl_search);
     h.lum[k].child = std::move(pl.idx);
     h.lum[k].scale = std::move(pl.scale);
     h.chroma[k].child = std::move(pc.idx);

@@ -26,6 +26,8 @@ const ParamSpec k_params[] = {
     {"beta", ParamSpec::Type::integer, "11", 3, 63, {}, "light beta nodes, uniform in sin(beta) (level 1; odd)"},
     {"huffman", ParamSpec::Type::choice, "auto", 0, 0, {"auto", "off"}, "Huffman-code index streams where smaller (auto) or always bit-pack"},
     {"scale_bits", ParamSpec::Type::choice, "auto", 0, 0, {"auto", "8", "16"}, "scale storage; auto = 8 for LDR, 16 for HDR data (max > 1)"},
+    {"noise", ParamSpec::Type::choice, "off", 0, 0, {"auto", "off"},
+     "auto = cap each level's thresholds at the SSIM two noisy copies of one signal reach (noise estimated from the data); off = thresholds as given"},
 };
 
 class MlvqCodec final : public Codec {
@@ -45,7 +47,12 @@ class MlvqCodec final : public Codec {
     o.grid.nalpha = int(p.get_int("alpha"));
     o.grid.nbeta = int(p.get_int("beta"));
     if (o.grid.nbeta % 2 == 0) return invalid_argument("mlvq: beta must be odd (a node at beta = 0), got " + std::to_string(o.grid.nbeta));
-    for (int k = 1; k <= 4; ++k) o.thr[k] = p.get_real("ssim" + std::to_string(k));
+    for (int k = 1; k <= 4; ++k) o.thr[k] = o.thr_chroma[k] = p.get_real("ssim" + std::to_string(k));
+    NoiseCeilings nc;
+    if (p.get("noise") == "auto") {
+      nc = noise_ceilings(btf, make_plan(d, o.grid), estimate_noise(btf));
+      for (int k = 1; k <= 4; ++k) o.thr[k] = std::min(o.thr[k], nc.lum[k]), o.thr_chroma[k] = std::min(o.thr_chroma[k], nc.chroma[k]);
+    }
     // HDR from the data range: any value above 1 (or an HDR source) needs 16-bit scales.
     float mx = 0;
     for (size_t i = 0; i < btf.size(); ++i) mx = std::max(mx, btf.data()[i]);
@@ -103,9 +110,16 @@ class MlvqCodec final : public Codec {
     const uint64_t plain = c.model->plain_payload_bytes();
     st.add("payload_bytes_plain", double(plain));
     st.add("payload_bytes", double(c.bytes));
+    for (const auto& [name, bytes] : c.model->tensor_bytes()) st.add("bytes." + name, double(bytes));
     st.add("ratio_plain_vs_f32", raw / double(plain));
     st.add("ratio_vs_f32", raw / double(c.bytes));
     st.add("huffman_gain", double(plain) / double(c.bytes));
+    for (int k = 4; k >= 1; --k) {
+      st.add("noise_ceiling.lum" + std::to_string(k), nc.lum[k]);
+      st.add("noise_ceiling.chroma" + std::to_string(k), nc.chroma[k]);
+      st.add("threshold.lum" + std::to_string(k), o.thr[k]);
+      st.add("threshold.chroma" + std::to_string(k), o.thr_chroma[k]);
+    }
     st.add("mean_texel_ssim", c.rep.mean_texel_ssim);
     st.add("resample_rel_rmse", c.rep.resample_rel_rmse);
     for (const Candidate& o2 : cands) {

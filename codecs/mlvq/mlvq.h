@@ -24,7 +24,18 @@
 //     or arbitrary directions; OpenCL batched evaluation (kernels/mlvq.cl, mlvq_cl.cpp).
 //
 // Parameters: scheme (best|1|2|3|4), ssim4..ssim1 (per-level thresholds), phi/theta/alpha/beta
-// (grid), huffman (auto|off), scale_bits (auto|8|16). `scheme=best` encodes with all four
+// (grid), huffman (auto|off), scale_bits (auto|8|16), noise (off|auto).
+//
+// noise=auto (noise.cpp): each level's luminance and chromaticity thresholds are capped at the
+// level's "noise ceiling", the median over the level's slices of the SSIM two noisy copies of
+// one slice reach, (2 s2 + C2) / (2 s2 + 2 n2 + C2), with the noise variance n2 estimated per
+// image by Donoho's MAD of the finest diagonal Haar details and carried through the resampling
+// weights. It is off by default because the image-domain estimator counts spatial contrast at
+// the texel scale as noise: on a BTF whose texel magnitudes jump by 100x between neighbours
+// (tests/mlvq_test.cpp HdrFromOneMillionth...) it drives the ceilings towards 0 and the
+// error up to 0.90; and on the textile at the paper's grid the ceilings are 0.98-0.998, i.e.
+// they do not bind: noise is not what makes mlvq's codebooks large there (docs/benchmarks.md,
+// issue 22 section). `scheme=best` encodes with all four
 // schemes and keeps the smallest among those whose estimated quality (mean per-texel SSIM of
 // the resampled luminance) is within 0.005 of the best scheme's.
 #pragma once

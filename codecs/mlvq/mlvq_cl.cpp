@@ -45,22 +45,22 @@ Status set_args(cl_kernel k, std::initializer_list<std::pair<const void*, size_t
 
 void ssim_search_reference(const SearchProblem& p, SearchResult& r) {
   r.idx.assign(size_t(p.B), -1);
-  r.sim.assign(size_t(p.B), -2.f);
+  r.sim.assign(size_t(p.B), -3.f);
   r.scale.assign(size_t(p.B), 1.f);
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < p.B; ++i) {
     const double* m = p.xm + 5 * i;
     const float m0 = float(m[0]), m1 = float(m[1]), m2 = float(m[2]), m3 = float(m[3]), m4 = float(m[4]);
-    float bs = -2, bsc = 1, unused;
+    float bs = -3, bsc = 1, unused;
     int bj = -1;
     for (int j = 0; j < p.K; ++j) {
       const double* e = p.em + 4 * j;
       float s = 2, sc = 1;
       if (p.dl > 0)
-        s = ssim_f(float(p.dl), m0, m1, float(e[0]), float(e[1]), dot_f(p.Xl + size_t(i) * p.dl, p.El + size_t(j) * p.dl, p.dl), m2, true, &sc);
+        s = ssim_f(float(p.dl), m0, m1, float(e[0]), float(e[1]), dot_f(p.Xl + size_t(i) * p.dl, p.El + size_t(j) * p.dl, p.dl), m2, true, &sc) - p.tl;
       if (p.dc > 0 && s > bs)
         s = std::min(s, ssim_f(float(p.dc), m3, m4, float(e[2]), float(e[3]), dot_f(p.Xc + size_t(i) * p.dc, p.Ec + size_t(j) * p.dc, p.dc), 1.0f,
-                               false, &unused));
+                               false, &unused) - p.tc);
       if (s > bs) bs = s, bj = j, bsc = sc;
     }
     r.idx[size_t(i)] = bj, r.sim[size_t(i)] = bs, r.scale[size_t(i)] = bsc;
@@ -83,15 +83,16 @@ Status ssim_search_cl(const SearchProblem& p, SearchResult& r) {
   BTFC_ASSIGN_OR_RETURN(ocl::Buffer bxm, buf(xm.data(), xm.size()));
   BTFC_ASSIGN_OR_RETURN(ocl::Buffer bem, buf(em.data(), em.size()));
   r.idx.assign(size_t(p.B), -1);
-  r.sim.assign(size_t(p.B), -2.f);
+  r.sim.assign(size_t(p.B), -3.f);
   r.scale.assign(size_t(p.B), 1.f);
   BTFC_ASSIGN_OR_RETURN(ocl::Buffer bi, ocl::Buffer::wrap(*rt, size_t(p.B) * 4, r.idx.data(), CL_MEM_WRITE_ONLY));
   BTFC_ASSIGN_OR_RETURN(ocl::Buffer bs, ocl::Buffer::wrap(*rt, size_t(p.B) * 4, r.sim.data(), CL_MEM_WRITE_ONLY));
   BTFC_ASSIGN_OR_RETURN(ocl::Buffer bc, ocl::Buffer::wrap(*rt, size_t(p.B) * 4, r.scale.data(), CL_MEM_WRITE_ONLY));
   cl_mem m[9] = {bxl.get(), bxc.get(), bel.get(), bec.get(), bxm.get(), bem.get(), bi.get(), bs.get(), bc.get()};
   const cl_int B = p.B, K = p.K, dl = p.dl, dc = p.dc;
+  const cl_float tl = p.tl, tc = p.tc;
   BTFC_RETURN_IF_ERROR(set_args(k, {{&m[0], sizeof(cl_mem)}, {&m[1], sizeof(cl_mem)}, {&m[2], sizeof(cl_mem)}, {&m[3], sizeof(cl_mem)},
-                                    {&m[4], sizeof(cl_mem)}, {&m[5], sizeof(cl_mem)}, {&B, 4}, {&K, 4}, {&dl, 4}, {&dc, 4},
+                                    {&m[4], sizeof(cl_mem)}, {&m[5], sizeof(cl_mem)}, {&B, 4}, {&K, 4}, {&dl, 4}, {&dc, 4}, {&tl, 4}, {&tc, 4},
                                     {&m[6], sizeof(cl_mem)}, {&m[7], sizeof(cl_mem)}, {&m[8], sizeof(cl_mem)}}));
   const size_t global = size_t(p.B);
   BTFC_CL_CHECK(clEnqueueNDRangeKernel(q, k, 1, nullptr, &global, nullptr, 0, nullptr, nullptr), "mlvq_ssim_search");

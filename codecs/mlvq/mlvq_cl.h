@@ -20,15 +20,17 @@ struct Hierarchy;
 // may be 0 (that part is not compared). xm: per candidate (sum x, sum x^2, peak, sum xc,
 // sum xc^2); em: per entry (sum e, sum e^2, sum ec, sum ec^2). Similarity: luminance SSIM up to
 // the least-squares scale (dynamic range = the candidate's peak), chromaticity SSIM unscaled
-// (range 1), their minimum when both parts are present.
+// (range 1); the score is the margin over the thresholds tl / tc, the minimum of (lum SSIM - tl)
+// and (chroma SSIM - tc) over the parts present; the best entry has the largest score.
 struct SearchProblem {
   int B = 0, K = 0, dl = 0, dc = 0;
   const float *Xl = nullptr, *Xc = nullptr, *El = nullptr, *Ec = nullptr;
   const double *xm = nullptr, *em = nullptr;
+  float tl = 0, tc = 0;
 };
 struct SearchResult {
   std::vector<int> idx;  // -1 when K = 0
-  std::vector<float> sim, scale;
+  std::vector<float> sim, scale;  // sim: the best score (margin), -3 when K = 0
 };
 void ssim_search_reference(const SearchProblem& p, SearchResult& r);
 Status ssim_search_cl(const SearchProblem& p, SearchResult& r);

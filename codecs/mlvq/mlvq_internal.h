@@ -124,10 +124,31 @@ void decode_texel(const Hierarchy& h, size_t texel, float* lum, float* chroma);
 double ssim_from_moments(double n, double sx, double sxx, double se, double see, double sxe, double L, bool scaled,
                          double* scale);
 
+// ---- noise-adaptive thresholds (noise.cpp) -----------------------------------------------------
+// Per (light, view) image (index l + nl v): the noise variance of luminance L and of the
+// chromaticity (mean of r and g), by Donoho's MAD estimator on the finest diagonal Haar
+// details of 2 x 2 texel blocks (at most max_blocks blocks on a regular sub-grid). Zero when the
+// BTF is narrower or lower than 2 texels.
+struct NoiseEstimate {
+  std::vector<float> lum_var, chroma_var;
+};
+NoiseEstimate estimate_noise(const Btf& btf, size_t max_blocks = 1024);
+// Per level k (index 1..4): the median over the level-k slices of `sample_texels` evenly spaced
+// texels of the expected SSIM of two noisy copies of a slice, (2 s2 + C2) / (2 s2 + 2 n2 + C2)
+// with n2 the slice's mean resampled noise variance (sum_j w_j^2 sigma_j^2 per node) and s2 its
+// variance minus n2: for luminance (C2 from the slice's peak; all-zero slices skipped) and
+// chromaticity (range 1). 1 where nothing was measured.
+struct NoiseCeilings {
+  double lum[5] = {1, 1, 1, 1, 1}, chroma[5] = {1, 1, 1, 1, 1};
+};
+NoiseCeilings noise_ceilings(const Btf& btf, const ResamplePlan& plan, const NoiseEstimate& ne, size_t sample_texels = 64);
+
 struct EncodeOptions {
   Grid grid;
   int scheme = 2;
-  double thr[5] = {0, 0.98, 0.97, 0.95, 0.95};  // by level
+  // SSIM thresholds by level, for luminance (and RGB levels' luminance part) and chromaticity.
+  double thr[5] = {0, 0.98, 0.97, 0.95, 0.95};
+  double thr_chroma[5] = {0, 0.98, 0.97, 0.95, 0.95};
   int scale_bits = 8;
   bool cl_search = false;  // SSIM search through kernels/mlvq.cl
 };
@@ -190,6 +211,8 @@ class MlvqModel final : public Model {
   ModelStats& mutable_stats() { return m_stats; }
   // Payload bytes with every index stream bit-packed, and with the chosen (smaller) coding.
   uint64_t plain_payload_bytes() const;
+  // Stored bytes per tensor (what fills the payload), in save() order.
+  std::vector<std::pair<std::string, uint64_t>> tensor_bytes() const;
 
   static Result<std::unique_ptr<Model>> load(const ContainerReader& rd, const Params& p);
 

@@ -336,6 +336,12 @@ uint64_t MlvqModel::payload_bytes() const {
   return n;
 }
 
+std::vector<std::pair<std::string, uint64_t>> MlvqModel::tensor_bytes() const {
+  std::vector<std::pair<std::string, uint64_t>> v;
+  for (const Tensor& t : tensors(m_huffman, nullptr)) v.emplace_back(t.name, t.bytes.size());
+  return v;
+}
+
 uint64_t MlvqModel::plain_payload_bytes() const {
   uint64_t plain = 0;
   (void)tensors(false, &plain);
