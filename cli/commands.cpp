@@ -1,5 +1,6 @@
 // btfc subcommands: call the library, print tables or JSON. No algorithms live here.
 #include "cli/commands.h"
+#include "cli/outputs.h"
 
 #include <chrono>
 #include <cmath>
@@ -18,6 +19,7 @@
 #include "core/synth.h"
 #include "formats/bonn/bonn_btf.h"
 #include "formats/btf_io.h"
+#include "formats/preview.h"
 
 namespace btfc::cli {
 
@@ -38,8 +40,9 @@ int exit_code(const Status& s) {
 }
 
 int fail(const Global& g, const Status& s) {
-  if (g.json) std::cout << json{{"error", s.message()}, {"code", status_code_name(s.code())}}.dump(2) << "\n";
-  std::cerr << "error: " << s.message() << "\n";
+  const std::string msg = user_paths(s.message());  // never an internal temporary name
+  if (g.json) std::cout << json{{"error", msg}, {"code", status_code_name(s.code())}}.dump(2) << "\n";
+  std::cerr << "error: " << msg << "\n";
   return exit_code(s);
 }
 
@@ -149,6 +152,7 @@ int cmd_codecs(const Global& g, bool names_only) {
 }
 
 int cmd_synth(const Global& g, const SynthArgs& a) {
+  if (Status c = claim_output(a.out, {}, {"-o", {".btfc"}, true}); !c.ok()) return fail(g, c);
   SynthOptions o;
   o.width = a.width;
   o.height = a.height;
@@ -248,6 +252,7 @@ int cmd_info(const Global& g, const std::string& path, bool verify) {
 }
 
 int cmd_compress(const Global& g, const CompressArgs& a) {
+  if (Status c = claim_output(a.out, {a.in, a.work_file}, {"-o", {".btfc", ".btf"}}); !c.ok()) return fail(g, c);
   if (int code = 0; compress_streamed(g, a, code)) return code;
   auto resolved = resolve_spec(a.spec);
   if (!resolved.ok()) return fail(g, resolved.status());
@@ -305,6 +310,7 @@ int cmd_compress(const Global& g, const CompressArgs& a) {
 }
 
 int cmd_decompress(const Global& g, const DecompressArgs& a) {
+  if (Status c = claim_output(a.out, {a.in}, {"-o", {".btfc", ".btf"}, true}); !c.ok()) return fail(g, c);
   if (int code = 0; decompress_streamed(g, a, code)) return code;
   auto model = open_model(a.in);
   if (!model.ok()) return fail(g, model.status());
@@ -396,6 +402,7 @@ int cmd_compare(const Global& g, const CompareArgs& a) {
 }
 
 int cmd_relight(const Global& g, const RelightArgs& a) {
+  if (Status c = claim_output(a.out, {a.in, a.env}, {"-o", {".exr", ".png"}}); !c.ok()) return fail(g, c);
   auto model = open_model(a.in);
   if (!model.ok()) return fail(g, model.status());
   auto view = parse_theta_phi(a.view, "--view");
@@ -409,7 +416,8 @@ int cmd_relight(const Global& g, const RelightArgs& a) {
   auto img = relight(*model.value(), env.value(), view.value(), w, h);
   if (!img.ok()) return fail(g, img.status().with_context(a.in));
   const double relight_s = seconds_since(t0);
-  Status s = write_rgb_exr(a.out, w, h, img.value());
+  RgbImage rgb{w, h, std::move(img).value()};
+  Status s = ends_with(a.out, ".png") ? write_rgb_image(a.out, rgb) : write_rgb_exr(a.out, w, h, rgb.rgb);
   if (!s.ok()) return fail(g, s);
   if (g.json)
     std::cout << json{{"output", a.out}, {"width", w}, {"height", h}, {"sh_order", a.order}, {"project_seconds", project_s},
@@ -421,6 +429,7 @@ int cmd_relight(const Global& g, const RelightArgs& a) {
 }
 
 int cmd_convert(const Global& g, const ConvertArgs& a) {
+  if (Status c = claim_output(a.out, {a.in}, {"-o", {".btf", ".btfc"}}); !c.ok()) return fail(g, c);
   auto model = open_model(a.in);
   if (!model.ok()) return fail(g, model.status());
   Status s;
