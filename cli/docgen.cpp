@@ -56,7 +56,7 @@ void man_options(std::ostream& m, const std::vector<const CLI::Option*>& opts) {
     } else {
       const auto sp = spellings(o);
       for (size_t i = 0; i < sp.size(); ++i) m << (i ? ", " : "") << "\\fB" << roff(sp[i]) << "\\fR";
-      if (o->get_type_size() != 0) m << " \\fI" << roff(o->get_type_name().empty() ? "VALUE" : o->get_type_name()) << "\\fR";
+      if (o->get_type_size_max() != 0) m << " \\fI" << roff(o->get_type_name().empty() ? "VALUE" : o->get_type_name()) << "\\fR";
       m << "\n";
     }
     m << roff(o->get_description());
@@ -70,7 +70,7 @@ void man_options(std::ostream& m, const std::vector<const CLI::Option*>& opts) {
 
 std::string man_page(const CLI::App& app, const std::string& version) {
   std::ostringstream m;
-  m << ".TH BTFC 1 \"\" \"btfc " << version << "\" \"User Commands\"\n.SH NAME\nbtfc \\- " << roff(app.get_description()) << "\n"
+  m << ".TH BTFC 1 \"\" \"btfc " << version << "\" \"User Commands\"\n.SH NAME\n" << roff(app.get_description()) << "\n"
     << ".SH SYNOPSIS\n.B btfc\n[\\fIGLOBAL OPTIONS\\fR] \\fICOMMAND\\fR [\\fIARGUMENTS\\fR] [\\fIGLOBAL OPTIONS\\fR]\n"
     << ".SH DESCRIPTION\nGlobal options are accepted before or after the command. \\fBbtfc help\\fR \\fICOMMAND\\fR prints a command's help.\n"
     << ".SH GLOBAL OPTIONS\n";
@@ -126,7 +126,7 @@ std::string zsh_completion(const CLI::App& app) {
       const auto sp = spellings(o);
       const std::string desc = plain(o->get_description());
       for (const std::string& name : sp)
-        s += " \\\n    '" + name + (o->get_type_size() != 0 ? "=" : "") + "[" + desc + "]" + (o->get_type_size() != 0 ? ":value:_files" : "") + "'";
+        s += " \\\n    '" + name + (o->get_type_size_max() != 0 ? "=" : "") + "[" + desc + "]" + (o->get_type_size_max() != 0 ? ":value:_files" : "") + "'";
     }
     return s;
   };
