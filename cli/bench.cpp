@@ -51,6 +51,7 @@ double ssim_of(const BenchResult& r) { return r.metrics.mean_ssim; }
 }  // namespace
 
 int cmd_bench(const Global& g, const BenchArgs& a) {
+  if (Status s = require_input(a.in); !s.ok()) return fail(g, s);
   if (a.csv == "-" && a.json_out == "-") return fail(g, invalid_argument("--csv - and --json-out -: only one of them can go to stdout"));
   if (!a.csv.empty() && !a.append)
     if (Status c = claim_output(a.csv, {a.in}, {"--csv", {".csv", ".txt"}, false, true}); !c.ok()) return fail(g, c);
@@ -174,6 +175,7 @@ int cmd_bench(const Global& g, const BenchArgs& a) {
 }
 
 int cmd_render(const Global& g, const RenderArgs& a) {
+  if (Status s = require_input(a.in); !s.ok()) return fail(g, s);
   if (Status c = claim_output(a.out, {a.in, a.env}, {"-o", {".png", ".exr"}}); !c.ok()) return fail(g, c);
   RenderSettings s;
   if (a.shape != "flat" && a.shape != "sphere") return fail(g, invalid_argument("--shape: expected flat or sphere, got '" + a.shape + "'"));

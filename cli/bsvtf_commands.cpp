@@ -46,6 +46,7 @@ struct TileCacheArgs {
 };
 
 int cmd_bsvtf(const Global& g, const BsvtfArgs& a) {
+  if (Status s = require_input(a.in); !s.ok()) return fail(g, s);
   if (Status c = claim_output(a.out, {a.in}, {"-o", {".bsvtf"}}); !c.ok()) return fail(g, c);
   auto model = open_model(a.in);
   if (!model.ok()) return fail(g, model.status());
@@ -114,6 +115,7 @@ Status write_csv(const std::string& path, const std::vector<std::pair<size_t, Ti
 }
 
 int cmd_tilecache(const Global& g, const TileCacheArgs& a) {
+  if (Status s = require_input(a.in); !s.ok()) return fail(g, s);
   if (a.csv == "-" && g.json) return fail(g, invalid_argument("--json and --csv -: only one report can go to stdout"));
   if (!a.csv.empty())
     if (Status c = claim_output(a.csv, {a.in}, {"--csv", {".csv", ".txt"}, false, true}); !c.ok()) return fail(g, c);

@@ -61,6 +61,8 @@ bool ends_with(const std::string& s, const std::string& suffix) {
   return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
+double dot3(const Vec3& a, const Vec3& b) { return double(a.x) * b.x + double(a.y) * b.y + double(a.z) * b.z; }
+
 double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 // A finite JSON number, or null (JSON has no infinity).
@@ -196,6 +198,7 @@ static int info_bonn(const Global& g, const std::string& path) {
 
 int cmd_info(const Global& g, const std::string& path, bool verify) {
   std::error_code ec;
+  if (Status s = require_input(path); !s.ok()) return fail(g, s);
   if (std::filesystem::is_directory(path, ec)) {
     auto btf = read_btf(path);
     if (!btf.ok()) return fail(g, btf.status());
@@ -252,6 +255,7 @@ int cmd_info(const Global& g, const std::string& path, bool verify) {
 }
 
 int cmd_compress(const Global& g, const CompressArgs& a) {
+  if (Status s = require_input(a.in); !s.ok()) return fail(g, s);
   if (Status c = claim_output(a.out, {a.in, a.work_file}, {"-o", {".btfc", ".btf"}}); !c.ok()) return fail(g, c);
   if (int code = 0; compress_streamed(g, a, code)) return code;
   auto resolved = resolve_spec(a.spec);
@@ -310,6 +314,7 @@ int cmd_compress(const Global& g, const CompressArgs& a) {
 }
 
 int cmd_decompress(const Global& g, const DecompressArgs& a) {
+  if (Status s = require_input(a.in); !s.ok()) return fail(g, s);
   if (Status c = claim_output(a.out, {a.in}, {"-o", {".btfc", ".btf"}, true}); !c.ok()) return fail(g, c);
   if (int code = 0; decompress_streamed(g, a, code)) return code;
   auto model = open_model(a.in);
@@ -341,6 +346,7 @@ int cmd_decompress(const Global& g, const DecompressArgs& a) {
 }
 
 int cmd_eval(const Global& g, const EvalArgs& a) {
+  if (Status s = require_input(a.in); !s.ok()) return fail(g, s);
   auto xy = parse_ints(a.texel, "--texel");
   if (!xy.ok()) return fail(g, xy.status());
   if (xy->size() != 2) return fail(g, invalid_argument("--texel: expected X,Y"));
@@ -369,6 +375,15 @@ int cmd_eval(const Global& g, const EvalArgs& a) {
     if (!wl.ok()) return fail(g, wl.status());
     auto wv = parse_theta_phi(a.wv, "--wv");
     if (!wv.ok()) return fail(g, wv.status());
+    // Beyond the measured directions the value is extrapolated: said once, on stderr.
+    std::string why;
+    if (wl->z < 0 || wv->z < 0) why = "a direction below the horizon (theta > 90)";
+    const double k_tol = std::cos(0.5 * 3.14159265358979323846 / 180.0);
+    if (why.empty() && d.num_views() == 1 && dot3(wv.value(), d.views.dirs[0]) < k_tol)
+      why = "--wv away from the model's one measured view";
+    if (why.empty() && d.num_lights() == 1 && dot3(wl.value(), d.lights.dirs[0]) < k_tol)
+      why = "--wl away from the model's one measured light";
+    if (!why.empty() && !g.quiet) std::cerr << "warning: " << a.in << ": extrapolated evaluation: " << why << "\n";
     Status s = m.eval_dir(x, y, wl.value(), wv.value(), out.data());
     if (!s.ok()) return fail(g, s);
   }
@@ -382,6 +397,8 @@ int cmd_eval(const Global& g, const EvalArgs& a) {
 }
 
 int cmd_compare(const Global& g, const CompareArgs& a) {
+  for (const std::string* p : {&a.a, &a.b})
+    if (Status s = require_input(*p); !s.ok()) return fail(g, s);
   auto ra = read_btf(a.a);
   if (!ra.ok()) return fail(g, ra.status());
   auto rb = read_btf(a.b);
@@ -402,6 +419,7 @@ int cmd_compare(const Global& g, const CompareArgs& a) {
 }
 
 int cmd_relight(const Global& g, const RelightArgs& a) {
+  if (Status s = require_input(a.in); !s.ok()) return fail(g, s);
   if (Status c = claim_output(a.out, {a.in, a.env}, {"-o", {".exr", ".png"}}); !c.ok()) return fail(g, c);
   auto model = open_model(a.in);
   if (!model.ok()) return fail(g, model.status());
@@ -429,6 +447,7 @@ int cmd_relight(const Global& g, const RelightArgs& a) {
 }
 
 int cmd_convert(const Global& g, const ConvertArgs& a) {
+  if (Status s = require_input(a.in); !s.ok()) return fail(g, s);
   if (Status c = claim_output(a.out, {a.in}, {"-o", {".btf", ".btfc"}}); !c.ok()) return fail(g, c);
   auto model = open_model(a.in);
   if (!model.ok()) return fail(g, model.status());

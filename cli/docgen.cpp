@@ -56,7 +56,7 @@ void man_options(std::ostream& m, const std::vector<const CLI::Option*>& opts) {
     } else {
       const auto sp = spellings(o);
       for (size_t i = 0; i < sp.size(); ++i) m << (i ? ", " : "") << "\\fB" << roff(sp[i]) << "\\fR";
-      if (o->get_type_size_max() != 0) m << " \\fI" << roff(o->get_type_name().empty() ? "VALUE" : o->get_type_name()) << "\\fR";
+      if (o->get_expected_max() != 0) m << " \\fI" << roff(o->get_type_name().empty() ? "VALUE" : o->get_type_name()) << "\\fR";
       m << "\n";
     }
     m << roff(o->get_description());
@@ -126,7 +126,7 @@ std::string zsh_completion(const CLI::App& app) {
       const auto sp = spellings(o);
       const std::string desc = plain(o->get_description());
       for (const std::string& name : sp)
-        s += " \\\n    '" + name + (o->get_type_size_max() != 0 ? "=" : "") + "[" + desc + "]" + (o->get_type_size_max() != 0 ? ":value:_files" : "") + "'";
+        s += " \\\n    '" + name + (o->get_expected_max() != 0 ? "=" : "") + "[" + desc + "]" + (o->get_expected_max() != 0 ? ":value:_files" : "") + "'";
     }
     return s;
   };

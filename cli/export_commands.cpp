@@ -24,6 +24,7 @@ struct ExportArgs {
 
 int cmd_export(const Global& g, const ExportArgs& a) {
   const auto t0 = std::chrono::steady_clock::now();
+  if (Status s = require_input(a.in); !s.ok()) return fail(g, s);
   if (Status c = claim_output(a.dir, {a.in, a.env, a.scene}, {"--to", {}, true}); !c.ok()) return fail(g, c);
   auto model = open_model(a.in);
   if (!model.ok()) return fail(g, model.status());

@@ -5,6 +5,7 @@
 #include "cli/commands.h"
 #include "cli/docgen.h"
 #include "cli/outputs.h"
+#include "formats/image_set.h"
 #include "core/blas_env.h"
 
 namespace {
@@ -27,12 +28,14 @@ int main(int argc, char** argv) {
   app.option_defaults()->always_capture_default();  // --help shows every default
   // Global options: accepted before or after the command, listed in every command's help
   // (added to each subcommand below, bound to the same variables).
-  bool force = false;
+  bool force = false, allow_partial = false;
   std::string device = "auto";
   auto add_globals = [&](CLI::App* a) {
     a->add_flag("--json", g.json, "machine-readable JSON output on stdout")->group("Global options");
     a->add_flag("-q,--quiet", g.quiet, "no progress bar or chatter")->group("Global options");
     a->add_flag("-f,--force", force, "replace an existing output (file or directory); never the input")->group("Global options");
+    a->add_flag("--allow-partial", allow_partial, "read an image set with images missing from its UBO sampling (named on stderr)")
+        ->group("Global options");
     a->add_option("--device", device, "where kernels run: cl (OpenCL, required), cpu (C++ reference), auto (OpenCL if it works)")
         ->check(CLI::IsMember({"auto", "cpu", "cl"}))
         ->group("Global options");
@@ -41,6 +44,7 @@ int main(int argc, char** argv) {
   app.parse_complete_callback([&] {
     set_device(device);
     set_force(force);
+    btfc::set_allow_partial_image_sets(allow_partial);
   });
   int code = 0;
 

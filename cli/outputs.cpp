@@ -165,6 +165,13 @@ Status claim_output(const std::string& out_text, const std::vector<std::string>&
   return {};
 }
 
+Status require_input(const std::string& path) {
+  std::error_code ec;
+  if (path.empty() || fs::symlink_status(path, ec).type() == fs::file_type::not_found || !fs::exists(path, ec))
+    return io_error(path + ": no such file or directory");
+  return {};
+}
+
 void register_work_dir(const std::string& dir) {
   std::lock_guard<std::mutex> lock(g_mutex);
   g_work_dirs.push_back(dir);

@@ -30,6 +30,8 @@ struct OutputRule {
 // Checks `out` against the rule and the inputs; registers it for cleanup. A "-" that the rule
 // accepts is returned ok and not registered. --force is the process-wide set_force().
 Status claim_output(const std::string& out, const std::vector<std::string>& inputs, const OutputRule& rule);
+// The one wording of a missing input: "PATH: no such file or directory" (exit 2).
+Status require_input(const std::string& path);
 // A directory where temporary working files (.btfc-work-PID.btf) may appear (bench: the temp dir).
 void register_work_dir(const std::string& dir);
 // Success: delete what --force moved aside. Failure: restore it.
