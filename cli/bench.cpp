@@ -1,5 +1,8 @@
 // `btfc bench` and `btfc render`: call codecs/measure.h and codecs/render.h, print tables, write
 // CSV / JSON / PNG. No algorithms live here.
+#include <unistd.h>
+
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -87,8 +90,11 @@ int cmd_bench(const Global& g, const BenchArgs& a) {
     std::filesystem::create_directories(a.renders_dir, ec);
     if (ec) return fail(g, io_error(a.renders_dir + ": cannot create: " + ec.message()));
   }
+  // Columns as wide as the longest label / spec, so long names do not shift the table.
+  int lw = std::max<int>(16, int(label.size())), sw = 34;
+  for (const std::string& sp : specs) sw = std::max(sw, int(sp.size()));
   if (!g.json && a.header)
-    std::fprintf(tbl, "%-16s %-34s %8s %7s %10s %8s %7s %7s %8s %8s %9s %8s\n", "data", "codec", "ratio", "bpv", "RMSE", "PSNR", "SSIM",
+    std::fprintf(tbl, "%-*s %-*s %8s %7s %10s %8s %7s %7s %8s %8s %9s %8s\n", lw, "data", sw, "codec", "ratio", "bpv", "RMSE", "PSNR", "SSIM",
                 "rSSIM", "enc s", "dec s", "Meval/s", "peak MB");
   std::vector<BenchResult> runs;
   json rows = json::array();
@@ -100,6 +106,8 @@ int cmd_bench(const Global& g, const BenchArgs& a) {
     opt.references = a.no_renders ? nullptr : &refs;
     opt.throughput_queries = a.throughput_queries;
     opt.progress = &progress;
+    if (!g.quiet && !g.json && specs.size() > 1 && isatty(STDERR_FILENO))
+      std::fprintf(stderr, "run %zu of %zu: %s\n", i + 1, specs.size(), specs[i].c_str());
     auto r = run_benchmark(btf.value(), specs[i], opt);
     if (!r.ok()) return fail(g, r.status().with_context(a.in + " with " + specs[i]));
     BenchResult& b = r.value();
@@ -111,10 +119,13 @@ int cmd_bench(const Global& g, const BenchArgs& a) {
                     {"encode_seconds", b.encode_seconds}, {"decode_seconds", b.decode_seconds},
                     {"evals_per_second", b.evals_per_second}, {"peak_rss_mb", peak_mb}, {"tensor_digest", b.tensor_digest},
                     {"device", b.device}});
-    if (!g.json)
-      std::fprintf(tbl, "%-16s %-34s %8.2f %7.4f %10.4g %8.3f %7.4f %7.4f %8.3f %8.3f %9.3f %8.0f\n", label.c_str(), specs[i].c_str(),
-                  b.ratio, b.bits_per_value, b.metrics.rmse, b.metrics.psnr, b.metrics.mean_ssim, a.no_renders ? NAN : b.render_ssim,
-                  b.encode_seconds, b.decode_seconds, b.evals_per_second / 1e6, peak_mb);
+    if (!g.json) {
+      char rssim[16] = "n/a";  // --no-renders: not measured (not "nan")
+      if (!a.no_renders) std::snprintf(rssim, sizeof rssim, "%.4f", b.render_ssim);
+      std::fprintf(tbl, "%-*s %-*s %8.2f %7.4f %10.4g %8.3f %7.4f %7s %8.3f %8.3f %9.3f %8.0f\n", lw, label.c_str(), sw, specs[i].c_str(),
+                   b.ratio, b.bits_per_value, b.metrics.rmse, b.metrics.psnr, b.metrics.mean_ssim, rssim, b.encode_seconds,
+                   b.decode_seconds, b.evals_per_second / 1e6, peak_mb);
+    }
     if (!a.renders_dir.empty())
       for (size_t k = 0; k < b.renders.size(); ++k) {
         const std::string path = a.renders_dir + "/" + safe_name(label + "-" + std::to_string(i) + "-" + specs[i]) +

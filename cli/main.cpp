@@ -148,7 +148,10 @@ int main(int argc, char** argv) {
 
   BenchArgs ba;
   bool no_header = false;
-  auto* bench = app.add_subcommand("bench", "measure codecs and parameter sweeps on a BTF: ratio, errors, rendered SSIM, times, throughput, memory");
+  auto* bench = app.add_subcommand("bench", "measure codecs and parameter sweeps on a BTF. Columns: ratio = float32 bytes / payload bytes; bpv = payload bits per "
+      "value; RMSE, PSNR (dB, peak = the data's maximum); SSIM = mean SSIM over the BTF's images; rSSIM = SSIM of rendered "
+      "flat and sphere images (n/a with --no-renders); enc s / dec s = encode / full decode seconds; Meval/s = million "
+      "interpolated evaluations per second; peak MB = peak resident memory");
   bench->add_option("input", ba.in, "BTF (image set, raw .btfc or Bonn .btf)")->required();
   bench->add_option("-c,--codec", ba.specs, "codec spec (repeatable); a comma list sweeps a parameter: fmf:rank=4,8,16")->required();
   bench->add_option("--label", ba.label, "data label in the table (default: the input's name)");

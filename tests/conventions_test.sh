@@ -56,6 +56,12 @@ check bench-csv-stdout 0 "$BTFC" bench "$W/s.btfc" -c fmf:rank=2 --csv - --no-re
 python3 -c "import csv,sys; r=list(csv.DictReader(open(sys.argv[1]))); assert r[0]['spec_given']=='fmf:rank=2', r; print('ok   bench-csv-parses')" "$W/out.txt" || fails=$((fails + 1))
 check bench-json-stdout 0 "$BTFC" bench "$W/s.btfc" -c fmf:rank=2 --json-out - --no-renders --throughput-queries 0
 python3 -c "import json,sys; j=json.load(open(sys.argv[1])); assert len(j['runs'])==1; print('ok   bench-json-parses')" "$W/out.txt" || fails=$((fails + 1))
+# bench: aligned with a long label, no "nan" for the skipped rendered SSIM, columns explained.
+check bench-long-label 0 "$BTFC" bench "$W/s.btfc" -c fmf:rank=2 --label a-rather-long-data-label-of-forty-chars --no-renders --throughput-queries 0
+head -2 "$W/out.txt" | awk '{print length($0)}' | sort -u | wc -l | grep -q '^1$' && echo "ok   bench-aligned" || { echo "FAIL bench-aligned"; cat "$W/out.txt"; fails=$((fails + 1)); }
+grep -q nan "$W/out.txt" && { echo "FAIL bench-no-nan"; fails=$((fails + 1)); } || echo "ok   bench-no-nan"
+"$BTFC" bench --help >"$W/h.txt"
+expect_grep bench-columns-explained "bpv = payload bits per" "$W/h.txt"
 # Output extensions match what is written.
 check compress-png 1 "$BTFC" compress "$W/s.btfc" -c fmf -o "$W/x.png"
 [ ! -e "$W/x.png" ] && echo "ok   compress-png-nothing" || { echo "FAIL compress-png-nothing"; fails=$((fails + 1)); }
