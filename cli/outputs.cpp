@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cerrno>
 #include <cstdio>
 #include <filesystem>
@@ -103,10 +104,14 @@ void wait_for_signals() {
   const int sig = b;
   {
     std::lock_guard<std::mutex> lock(g_mutex);
-    for (const Claim& c : g_claims) undo(c);
-    for (const fs::path& d : g_work_dirs) {
-      std::error_code ec;
-      fs::remove(d / (".btfc-work-" + pid_text() + ".btf"), ec);
+    // Writer threads may still create a file or folder while we remove: a few passes apart.
+    for (int pass = 0; pass < 4; ++pass) {
+      if (pass) std::this_thread::sleep_for(std::chrono::milliseconds(30));
+      for (const Claim& c : g_claims) undo(c);
+      for (const fs::path& d : g_work_dirs) {
+        std::error_code ec;
+        fs::remove(d / (".btfc-work-" + pid_text() + ".btf"), ec);
+      }
     }
     std::fprintf(stderr, "\nerror: interrupted (%s); temporary files removed, existing outputs kept\n", sig == SIGINT ? "SIGINT" : "SIGTERM");
     std::fflush(stderr);
