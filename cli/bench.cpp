@@ -1,5 +1,8 @@
 // `btfc bench` and `btfc render`: call codecs/measure.h and codecs/render.h, print tables, write
 // CSV / JSON / PNG. No algorithms live here.
+#include <unistd.h>
+
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -8,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli/commands.h"
+#include "cli/outputs.h"
 #include "codecs/lpca/lpca.h"  // read_rgb_exr / write_rgb_exr
 #include "codecs/measure.h"
 #include "core/sysinfo.h"
@@ -50,6 +54,12 @@ double ssim_of(const BenchResult& r) { return r.metrics.mean_ssim; }
 }  // namespace
 
 int cmd_bench(const Global& g, const BenchArgs& a) {
+  if (Status s = require_input(a.in); !s.ok()) return fail(g, s);
+  if (a.csv == "-" && a.json_out == "-") return fail(g, invalid_argument("--csv - and --json-out -: only one of them can go to stdout"));
+  if (!a.csv.empty() && !a.append)
+    if (Status c = claim_output(a.csv, {a.in}, {"--csv", {".csv", ".txt"}, false, true}); !c.ok()) return fail(g, c);
+  if (!a.json_out.empty())
+    if (Status c = claim_output(a.json_out, {a.in}, {"--json-out", {".json"}, false, true}); !c.ok()) return fail(g, c);
   if (int code = 0; bench_streamed(g, a, code)) return code;  // larger than --max-memory: streamed fmf
   std::vector<std::string> specs;
   for (const std::string& s : a.specs) {
@@ -61,6 +71,10 @@ int cmd_bench(const Global& g, const BenchArgs& a) {
       specs.push_back(e);
     }
   }
+  // With a stream on stdout (--csv - / --json-out -) the table goes to stderr.
+  const bool streaming = a.csv == "-" || a.json_out == "-";
+  if (streaming && g.json) return fail(g, invalid_argument("--json and --csv - / --json-out -: only one report can go to stdout"));
+  FILE* tbl = streaming ? stderr : stdout;
   auto btf = read_btf(a.in);
   if (!btf.ok()) return fail(g, btf.status());
   const std::string label = a.label.empty() ? std::filesystem::path(a.in).filename().string() : a.label;
@@ -76,8 +90,11 @@ int cmd_bench(const Global& g, const BenchArgs& a) {
     std::filesystem::create_directories(a.renders_dir, ec);
     if (ec) return fail(g, io_error(a.renders_dir + ": cannot create: " + ec.message()));
   }
+  // Columns as wide as the longest label / spec, so long names do not shift the table.
+  int lw = std::max<int>(16, int(label.size())), sw = 34;
+  for (const std::string& sp : specs) sw = std::max(sw, int(sp.size()));
   if (!g.json && a.header)
-    std::printf("%-16s %-34s %8s %7s %10s %8s %7s %7s %8s %8s %9s %8s\n", "data", "codec", "ratio", "bpv", "RMSE", "PSNR", "SSIM",
+    std::fprintf(tbl, "%-*s %-*s %8s %7s %10s %8s %7s %7s %8s %8s %9s %8s\n", lw, "data", sw, "codec", "ratio", "bpv", "RMSE", "PSNR", "SSIM",
                 "rSSIM", "enc s", "dec s", "Meval/s", "peak MB");
   std::vector<BenchResult> runs;
   json rows = json::array();
@@ -89,6 +106,8 @@ int cmd_bench(const Global& g, const BenchArgs& a) {
     opt.references = a.no_renders ? nullptr : &refs;
     opt.throughput_queries = a.throughput_queries;
     opt.progress = &progress;
+    if (!g.quiet && !g.json && specs.size() > 1 && isatty(STDERR_FILENO))
+      std::fprintf(stderr, "run %zu of %zu: %s\n", i + 1, specs.size(), specs[i].c_str());
     auto r = run_benchmark(btf.value(), specs[i], opt);
     if (!r.ok()) return fail(g, r.status().with_context(a.in + " with " + specs[i]));
     BenchResult& b = r.value();
@@ -100,10 +119,13 @@ int cmd_bench(const Global& g, const BenchArgs& a) {
                     {"encode_seconds", b.encode_seconds}, {"decode_seconds", b.decode_seconds},
                     {"evals_per_second", b.evals_per_second}, {"peak_rss_mb", peak_mb}, {"tensor_digest", b.tensor_digest},
                     {"device", b.device}});
-    if (!g.json)
-      std::printf("%-16s %-34s %8.2f %7.4f %10.4g %8.3f %7.4f %7.4f %8.3f %8.3f %9.3f %8.0f\n", label.c_str(), specs[i].c_str(),
-                  b.ratio, b.bits_per_value, b.metrics.rmse, b.metrics.psnr, b.metrics.mean_ssim, a.no_renders ? NAN : b.render_ssim,
-                  b.encode_seconds, b.decode_seconds, b.evals_per_second / 1e6, peak_mb);
+    if (!g.json) {
+      char rssim[16] = "n/a";  // --no-renders: not measured (not "nan")
+      if (!a.no_renders) std::snprintf(rssim, sizeof rssim, "%.4f", b.render_ssim);
+      std::fprintf(tbl, "%-*s %-*s %8.2f %7.4f %10.4g %8.3f %7.4f %7s %8.3f %8.3f %9.3f %8.0f\n", lw, label.c_str(), sw, specs[i].c_str(),
+                   b.ratio, b.bits_per_value, b.metrics.rmse, b.metrics.psnr, b.metrics.mean_ssim, rssim, b.encode_seconds,
+                   b.decode_seconds, b.evals_per_second / 1e6, peak_mb);
+    }
     if (!a.renders_dir.empty())
       for (size_t k = 0; k < b.renders.size(); ++k) {
         const std::string path = a.renders_dir + "/" + safe_name(label + "-" + std::to_string(i) + "-" + specs[i]) +
@@ -122,10 +144,10 @@ int cmd_bench(const Global& g, const BenchArgs& a) {
     for (const BenchResult& r : runs) ptrs.push_back(&r);
     for (auto [name, fn] : {std::pair{"psnr", &psnr_of}, std::pair{"mean_ssim", &ssim_of}}) {
       const std::vector<size_t> front = pareto_front(ptrs, fn);
-      if (!g.json) std::printf("\nPareto front by %s (the best codec within each byte budget):\n  %-14s %-34s %10s\n", name, "budget bytes", "winner", name);
+      if (!g.json) std::fprintf(tbl, "\nPareto front by %s (the best codec within each byte budget):\n  %-14s %-34s %10s\n", name, "budget bytes", "winner", name);
       for (size_t i : front) {
         pareto.push_back({{"metric", name}, {"budget_bytes", runs[i].payload_bytes}, {"spec", runs[i].spec_given}, {"value", num(fn(runs[i]))}});
-        if (!g.json) std::printf("  <= %-11llu %-34s %10.4f\n", (unsigned long long)runs[i].payload_bytes, runs[i].spec_given.c_str(), fn(runs[i]));
+        if (!g.json) std::fprintf(tbl, "  <= %-11llu %-34s %10.4f\n", (unsigned long long)runs[i].payload_bytes, runs[i].spec_given.c_str(), fn(runs[i]));
       }
     }
   }
@@ -133,13 +155,18 @@ int cmd_bench(const Global& g, const BenchArgs& a) {
               {"input", a.in}, {"shape", btf->desc().summary()}, {"runs", rows}};
   if (a.pareto) report["pareto"] = pareto;
   if (!a.json_out.empty()) {
-    std::ofstream f(a.json_out);
+    std::ofstream file;
+    if (a.json_out != "-") file.open(a.json_out);
+    std::ostream& f = a.json_out == "-" ? std::cout : file;
     f << report.dump(2) << "\n";
     if (!f) return fail(g, io_error(a.json_out + ": cannot write"));
   }
   if (!a.csv.empty()) {
-    const bool fresh = !a.append || !std::filesystem::exists(a.csv) || std::filesystem::file_size(a.csv) == 0;
-    std::ofstream f(a.csv, a.append ? std::ios::app : std::ios::trunc);
+    const bool to_stdout = a.csv == "-";
+    const bool fresh = to_stdout || !a.append || !std::filesystem::exists(a.csv) || std::filesystem::file_size(a.csv) == 0;
+    std::ofstream file;
+    if (!to_stdout) file.open(a.csv, a.append ? std::ios::app : std::ios::trunc);
+    std::ostream& f = to_stdout ? std::cout : file;
     if (fresh) f << k_csv_columns << "\n";
     for (const json& r : rows) {
       f << csv_field(label) << ',' << csv_field(r["spec_given"]) << ',' << csv_field(r["spec"]) << ','
@@ -154,11 +181,13 @@ int cmd_bench(const Global& g, const BenchArgs& a) {
     if (!f) return fail(g, io_error(a.csv + ": cannot write"));
   }
   if (g.json) std::cout << report.dump(2) << "\n";
-  else if (!g.quiet) std::printf("machine: %s; kernels ran on %s\n", machine.c_str(), runs.empty() ? "-" : runs[0].device.c_str());
+  else if (!g.quiet) std::fprintf(tbl, "machine: %s; kernels ran on %s\n", machine.c_str(), runs.empty() ? "-" : runs[0].device.c_str());
   return 0;
 }
 
 int cmd_render(const Global& g, const RenderArgs& a) {
+  if (Status s = require_input(a.in); !s.ok()) return fail(g, s);
+  if (Status c = claim_output(a.out, {a.in, a.env}, {"-o", {".png", ".exr"}}); !c.ok()) return fail(g, c);
   RenderSettings s;
   if (a.shape != "flat" && a.shape != "sphere") return fail(g, invalid_argument("--shape: expected flat or sphere, got '" + a.shape + "'"));
   s.shape = a.shape == "flat" ? RenderSettings::Shape::flat : RenderSettings::Shape::sphere;

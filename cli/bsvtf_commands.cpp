@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli/commands.h"
+#include "cli/outputs.h"
 #include "codecs/fmf/bsvtf.h"
 #include "codecs/fmf/tile_cache.h"
 #include "formats/btf_io.h"
@@ -45,6 +46,8 @@ struct TileCacheArgs {
 };
 
 int cmd_bsvtf(const Global& g, const BsvtfArgs& a) {
+  if (Status s = require_input(a.in); !s.ok()) return fail(g, s);
+  if (Status c = claim_output(a.out, {a.in}, {"-o", {".bsvtf"}}); !c.ok()) return fail(g, c);
   auto model = open_model(a.in);
   if (!model.ok()) return fail(g, model.status());
   BsvtfOptions o;
@@ -83,6 +86,14 @@ int cmd_bsvtf(const Global& g, const BsvtfArgs& a) {
 }
 
 Status write_csv(const std::string& path, const std::vector<std::pair<size_t, TileCacheRun>>& runs) {
+  if (path == "-") {
+    std::cout << "cache_tiles,frame,resident,working_set,adds,swaps,evictions,covered,packets,bytes,error,ssim\n";
+    for (const auto& [slots, run] : runs)
+      for (const TileCacheFrame& x : run.frames)
+        std::cout << slots << ',' << x.frame << ',' << x.resident << ',' << x.working_set << ',' << x.adds << ',' << x.swaps << ','
+                  << x.evictions << ',' << x.covered << ',' << x.packets << ',' << x.bytes << ',' << x.error << ',' << x.ssim << '\n';
+    return std::cout.flush() ? Status{} : io_error("stdout: cannot write");
+  }
   const std::string tmp = path + ".tmp-" + std::to_string(::getpid());
   {
     std::ofstream f(tmp, std::ios::trunc);
@@ -104,6 +115,10 @@ Status write_csv(const std::string& path, const std::vector<std::pair<size_t, Ti
 }
 
 int cmd_tilecache(const Global& g, const TileCacheArgs& a) {
+  if (Status s = require_input(a.in); !s.ok()) return fail(g, s);
+  if (a.csv == "-" && g.json) return fail(g, invalid_argument("--json and --csv -: only one report can go to stdout"));
+  if (!a.csv.empty())
+    if (Status c = claim_output(a.csv, {a.in}, {"--csv", {".csv", ".txt"}, false, true}); !c.ok()) return fail(g, c);
   TileCacheOptions o;
   char x = 0, extra = 0;
   if (std::sscanf(a.screen.c_str(), "%d%c%d%c", &o.path.width, &x, &o.path.height, &extra) != 3 || x != 'x')
@@ -129,6 +144,7 @@ int cmd_tilecache(const Global& g, const TileCacheArgs& a) {
   if (!a.csv.empty()) {
     Status s = write_csv(a.csv, runs);
     if (!s.ok()) return fail(g, s);
+    if (a.csv == "-") return 0;  // the CSV is the output
   }
   const uint64_t slot = sim->tile_slot_bytes();
   if (g.json) {

@@ -1,5 +1,6 @@
 // btfc subcommands: call the library, print tables or JSON. No algorithms live here.
 #include "cli/commands.h"
+#include "cli/outputs.h"
 
 #include <chrono>
 #include <cmath>
@@ -18,6 +19,7 @@
 #include "core/synth.h"
 #include "formats/bonn/bonn_btf.h"
 #include "formats/btf_io.h"
+#include "formats/preview.h"
 
 namespace btfc::cli {
 
@@ -38,8 +40,9 @@ int exit_code(const Status& s) {
 }
 
 int fail(const Global& g, const Status& s) {
-  if (g.json) std::cout << json{{"error", s.message()}, {"code", status_code_name(s.code())}}.dump(2) << "\n";
-  std::cerr << "error: " << s.message() << "\n";
+  const std::string msg = user_paths(s.message());  // never an internal temporary name
+  if (g.json) std::cout << json{{"error", msg}, {"code", status_code_name(s.code())}}.dump(2) << "\n";
+  std::cerr << "error: " << msg << "\n";
   return exit_code(s);
 }
 
@@ -57,6 +60,8 @@ namespace {
 bool ends_with(const std::string& s, const std::string& suffix) {
   return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
+
+double dot3(const Vec3& a, const Vec3& b) { return double(a.x) * b.x + double(a.y) * b.y + double(a.z) * b.z; }
 
 double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
@@ -149,6 +154,7 @@ int cmd_codecs(const Global& g, bool names_only) {
 }
 
 int cmd_synth(const Global& g, const SynthArgs& a) {
+  if (Status c = claim_output(a.out, {}, {"-o", {".btfc"}, true}); !c.ok()) return fail(g, c);
   SynthOptions o;
   o.width = a.width;
   o.height = a.height;
@@ -192,6 +198,7 @@ static int info_bonn(const Global& g, const std::string& path) {
 
 int cmd_info(const Global& g, const std::string& path, bool verify) {
   std::error_code ec;
+  if (Status s = require_input(path); !s.ok()) return fail(g, s);
   if (std::filesystem::is_directory(path, ec)) {
     auto btf = read_btf(path);
     if (!btf.ok()) return fail(g, btf.status());
@@ -248,6 +255,8 @@ int cmd_info(const Global& g, const std::string& path, bool verify) {
 }
 
 int cmd_compress(const Global& g, const CompressArgs& a) {
+  if (Status s = require_input(a.in); !s.ok()) return fail(g, s);
+  if (Status c = claim_output(a.out, {a.in, a.work_file}, {"-o", {".btfc", ".btf"}}); !c.ok()) return fail(g, c);
   if (int code = 0; compress_streamed(g, a, code)) return code;
   auto resolved = resolve_spec(a.spec);
   if (!resolved.ok()) return fail(g, resolved.status());
@@ -305,6 +314,8 @@ int cmd_compress(const Global& g, const CompressArgs& a) {
 }
 
 int cmd_decompress(const Global& g, const DecompressArgs& a) {
+  if (Status s = require_input(a.in); !s.ok()) return fail(g, s);
+  if (Status c = claim_output(a.out, {a.in}, {"-o", {".btfc", ".btf"}, true}); !c.ok()) return fail(g, c);
   if (int code = 0; decompress_streamed(g, a, code)) return code;
   auto model = open_model(a.in);
   if (!model.ok()) return fail(g, model.status());
@@ -335,6 +346,7 @@ int cmd_decompress(const Global& g, const DecompressArgs& a) {
 }
 
 int cmd_eval(const Global& g, const EvalArgs& a) {
+  if (Status s = require_input(a.in); !s.ok()) return fail(g, s);
   auto xy = parse_ints(a.texel, "--texel");
   if (!xy.ok()) return fail(g, xy.status());
   if (xy->size() != 2) return fail(g, invalid_argument("--texel: expected X,Y"));
@@ -363,6 +375,15 @@ int cmd_eval(const Global& g, const EvalArgs& a) {
     if (!wl.ok()) return fail(g, wl.status());
     auto wv = parse_theta_phi(a.wv, "--wv");
     if (!wv.ok()) return fail(g, wv.status());
+    // Beyond the measured directions the value is extrapolated: said once, on stderr.
+    std::string why;
+    if (wl->z < 0 || wv->z < 0) why = "a direction below the horizon (theta > 90)";
+    const double k_tol = std::cos(0.5 * 3.14159265358979323846 / 180.0);
+    if (why.empty() && d.num_views() == 1 && dot3(wv.value(), d.views.dirs[0]) < k_tol)
+      why = "--wv away from the model's one measured view";
+    if (why.empty() && d.num_lights() == 1 && dot3(wl.value(), d.lights.dirs[0]) < k_tol)
+      why = "--wl away from the model's one measured light";
+    if (!why.empty() && !g.quiet) std::cerr << "warning: " << a.in << ": extrapolated evaluation: " << why << "\n";
     Status s = m.eval_dir(x, y, wl.value(), wv.value(), out.data());
     if (!s.ok()) return fail(g, s);
   }
@@ -376,6 +397,8 @@ int cmd_eval(const Global& g, const EvalArgs& a) {
 }
 
 int cmd_compare(const Global& g, const CompareArgs& a) {
+  for (const std::string* p : {&a.a, &a.b})
+    if (Status s = require_input(*p); !s.ok()) return fail(g, s);
   auto ra = read_btf(a.a);
   if (!ra.ok()) return fail(g, ra.status());
   auto rb = read_btf(a.b);
@@ -396,6 +419,8 @@ int cmd_compare(const Global& g, const CompareArgs& a) {
 }
 
 int cmd_relight(const Global& g, const RelightArgs& a) {
+  if (Status s = require_input(a.in); !s.ok()) return fail(g, s);
+  if (Status c = claim_output(a.out, {a.in, a.env}, {"-o", {".exr", ".png"}}); !c.ok()) return fail(g, c);
   auto model = open_model(a.in);
   if (!model.ok()) return fail(g, model.status());
   auto view = parse_theta_phi(a.view, "--view");
@@ -409,7 +434,8 @@ int cmd_relight(const Global& g, const RelightArgs& a) {
   auto img = relight(*model.value(), env.value(), view.value(), w, h);
   if (!img.ok()) return fail(g, img.status().with_context(a.in));
   const double relight_s = seconds_since(t0);
-  Status s = write_rgb_exr(a.out, w, h, img.value());
+  RgbImage rgb{w, h, std::move(img).value()};
+  Status s = ends_with(a.out, ".png") ? write_rgb_image(a.out, rgb) : write_rgb_exr(a.out, w, h, rgb.rgb);
   if (!s.ok()) return fail(g, s);
   if (g.json)
     std::cout << json{{"output", a.out}, {"width", w}, {"height", h}, {"sh_order", a.order}, {"project_seconds", project_s},
@@ -421,6 +447,8 @@ int cmd_relight(const Global& g, const RelightArgs& a) {
 }
 
 int cmd_convert(const Global& g, const ConvertArgs& a) {
+  if (Status s = require_input(a.in); !s.ok()) return fail(g, s);
+  if (Status c = claim_output(a.out, {a.in}, {"-o", {".btf", ".btfc"}}); !c.ok()) return fail(g, c);
   auto model = open_model(a.in);
   if (!model.ok()) return fail(g, model.status());
   Status s;

@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli/commands.h"
+#include "cli/outputs.h"
 #include "codecs/fmf/bsvtf.h"
 #include "codecs/fmf/fmf_export.h"
 #include "codecs/lpca/lpca.h"
@@ -23,6 +24,8 @@ struct ExportArgs {
 
 int cmd_export(const Global& g, const ExportArgs& a) {
   const auto t0 = std::chrono::steady_clock::now();
+  if (Status s = require_input(a.in); !s.ok()) return fail(g, s);
+  if (Status c = claim_output(a.dir, {a.in, a.env, a.scene}, {"--to", {}, true}); !c.ok()) return fail(g, c);
   auto model = open_model(a.in);
   if (!model.ok()) return fail(g, model.status());
   Model& m = *model.value();
@@ -94,7 +97,7 @@ void add_export_commands(CLI::App& app, const Global& g, int& code) {
   static ExportArgs a;
   auto* ex = app.add_subcommand("export", "write GPU-ready textures (KTX2), a JSON manifest and a GLSL reference shader for a model");
   ex->add_option("model", a.in, "model .btfc (fmf, lpyr, lpca, mlvq) or Bonn .btf")->required();
-  ex->add_option("--to", a.dir, "output directory (created; must not exist or be empty)")->required();
+  ex->add_option("--to", a.dir, "output directory (created; an existing one needs --force)")->required();
   ex->add_flag("--float", a.float32, "store float data as RGBA32F instead of RGBA16F");
   ex->add_flag("--clamp-half", a.clamp_half, "clamp values beyond the half range (reported) instead of scaling the texture");
   ex->add_option("--direction-map", a.direction_map, "size of the parabolic direction index / weight maps")->check(CLI::Range(2, 1024));

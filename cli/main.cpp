@@ -3,21 +3,49 @@
 #include <iostream>
 
 #include "cli/commands.h"
+#include "cli/docgen.h"
+#include "cli/outputs.h"
+#include "formats/image_set.h"
 #include "core/blas_env.h"
+
+namespace {
+CLI::App* find_command(CLI::App& app, const std::string& name) {
+  for (CLI::App* s : app.get_subcommands({}))
+    if (s->check_name(name)) return s;
+  return nullptr;
+}
+}  // namespace
 
 int main(int argc, char** argv) {
   btfc::reexec_for_openblas(argc, argv);
   using namespace btfc::cli;
+  install_interrupt_cleanup();  // SIGINT / SIGTERM: remove temporaries, keep old outputs (cli/outputs.h)
   CLI::App app{"btfc - compression toolkit for Bidirectional Texture Functions"};
   app.require_subcommand(1);
   Global g;
   for (int i = 0; i < argc; ++i) g.command_line += (i ? " " : "") + std::string(argv[i]);
-  app.add_flag("--json", g.json, "machine-readable JSON output on stdout");
-  app.add_flag("-q,--quiet", g.quiet, "no progress bar or chatter");
+  app.set_version_flag("--version", std::string("btfc ") + BTFC_VERSION);
+  app.option_defaults()->always_capture_default();  // --help shows every default
+  // Global options: accepted before or after the command, listed in every command's help
+  // (added to each subcommand below, bound to the same variables).
+  bool force = false, allow_partial = false;
   std::string device = "auto";
-  app.add_option("--device", device, "where kernels run: cl (OpenCL, required), cpu (C++ reference), auto (OpenCL if it works)")
-      ->check(CLI::IsMember({"auto", "cpu", "cl"}));
-  app.parse_complete_callback([&] { set_device(device); });
+  auto add_globals = [&](CLI::App* a) {
+    a->add_flag("--json", g.json, "machine-readable JSON output on stdout")->group("Global options");
+    a->add_flag("-q,--quiet", g.quiet, "no progress bar or chatter")->group("Global options");
+    a->add_flag("-f,--force", force, "replace an existing output (file or directory); never the input")->group("Global options");
+    a->add_flag("--allow-partial", allow_partial, "read an image set with images missing from its UBO sampling (named on stderr)")
+        ->group("Global options");
+    a->add_option("--device", device, "where kernels run: cl (OpenCL, required), cpu (C++ reference), auto (OpenCL if it works)")
+        ->check(CLI::IsMember({"auto", "cpu", "cl"}))
+        ->group("Global options");
+  };
+  add_globals(&app);
+  app.parse_complete_callback([&] {
+    set_device(device);
+    set_force(force);
+    btfc::set_allow_partial_image_sets(allow_partial);
+  });
   int code = 0;
 
   bool names_only = false;
@@ -120,7 +148,10 @@ int main(int argc, char** argv) {
 
   BenchArgs ba;
   bool no_header = false;
-  auto* bench = app.add_subcommand("bench", "measure codecs and parameter sweeps on a BTF: ratio, errors, rendered SSIM, times, throughput, memory");
+  auto* bench = app.add_subcommand("bench", "measure codecs and parameter sweeps on a BTF. Columns: ratio = float32 bytes / payload bytes; bpv = payload bits per "
+      "value; RMSE, PSNR (dB, peak = the data's maximum); SSIM = mean SSIM over the BTF's images; rSSIM = SSIM of rendered "
+      "flat and sphere images (n/a with --no-renders); enc s / dec s = encode / full decode seconds; Meval/s = million "
+      "interpolated evaluations per second; peak MB = peak resident memory");
   bench->add_option("input", ba.in, "BTF (image set, raw .btfc or Bonn .btf)")->required();
   bench->add_option("-c,--codec", ba.specs, "codec spec (repeatable); a comma list sweeps a parameter: fmf:rank=4,8,16")->required();
   bench->add_option("--label", ba.label, "data label in the table (default: the input's name)");
@@ -156,11 +187,52 @@ int main(int argc, char** argv) {
   add_export_commands(app, g, code);
   add_bsvtf_commands(app, g, code);
 
+  std::string help_cmd, doc_kind;
+  auto* help = app.add_subcommand("help", "show the help of a command (btfc help COMMAND) or of btfc");
+  help->add_option("command", help_cmd, "the command");
+  help->callback([&] {
+    if (help_cmd.empty()) {
+      std::cout << app.help();
+      return;
+    }
+    CLI::App* sub = find_command(app, help_cmd);
+    if (!sub || sub->get_group().empty()) {
+      std::cerr << "error: unknown command '" << help_cmd << "' (btfc --help lists the commands)\n";
+      code = 1;
+      return;
+    }
+    std::cout << sub->help();
+  });
+  auto* completion = app.add_subcommand("completion", "print a shell completion script: bash or zsh");
+  completion->add_option("shell", doc_kind, "bash | zsh")->required()->check(CLI::IsMember({"bash", "zsh"}));
+  completion->callback([&] { std::cout << (doc_kind == "bash" ? bash_completion(app) : zsh_completion(app)); });
+  auto* man = app.add_subcommand("man", "print the man page (roff), generated from the help");
+  man->callback([&] { std::cout << man_page(app, BTFC_VERSION); });
+
+  for (CLI::App* sub : app.get_subcommands({})) add_globals(sub);
+
+  // "btfc foo": name the unknown command (CLI11 would say a subcommand is required).
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    if (arg == "--device") {
+      ++i;
+      continue;
+    }
+    if (arg.empty() || arg[0] == '-') continue;
+    if (!find_command(app, arg)) {
+      std::cerr << "error: unknown command '" << arg << "' (btfc --help lists the commands)\n";
+      return 1;
+    }
+    break;
+  }
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
+    finish_outputs(false);
     const int rc = app.exit(e);
     return rc == 0 ? 0 : 1;
   }
+  finish_outputs(code == 0);
   return code;
 }

@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli/commands.h"
+#include "cli/outputs.h"
 #include "codecs/codec.h"
 #include "codecs/fmf/ooc_fmf.h"
 #include "core/limits.h"
@@ -239,6 +240,7 @@ bool bench_streamed(const Global& g, const BenchArgs& a, int& code) {
     std::printf("%-18s %-30s %9s %10s %9s %8s %9s %9s\n", "data", "codec (as given)", "ratio", "RMSE", "PSNR", "SSIM", "enc s", "dec s");
   std::error_code ec;
   const std::string temp_dir = std::filesystem::temp_directory_path(ec).string();
+  register_work_dir(temp_dir);  // SIGINT / SIGTERM remove the working file there too
   for (const std::string& spec : a.specs) {
     json report;
     TempFile temp;

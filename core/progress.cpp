@@ -34,8 +34,12 @@ void Progress::draw(bool force) {
   const int width = 30;
   int filled = int(frac * width);
   double secs = std::chrono::duration<double>(now - m_start).count();
-  std::fprintf(stderr, "\r%-24s [%.*s%*s] %5.1f%% %6.1fs", m_label.c_str(), filled,
-               "##############################", width - filled, "", frac * 100, secs);
+  // ETA from the rate so far, once there is a rate (1 % done, or 2 s spent).
+  char eta[32] = "  ETA   --";
+  if (frac >= 1) std::snprintf(eta, sizeof eta, "  done     ");
+  else if (frac > 0.01 || (frac > 0 && secs > 2)) std::snprintf(eta, sizeof eta, "  ETA %5.0fs", secs * (1 - frac) / frac);
+  std::fprintf(stderr, "\r%-24s [%.*s%*s] %5.1f%% %6.1fs%s", m_label.c_str(), filled,
+               "##############################", width - filled, "", frac * 100, secs, eta);
   std::fflush(stderr);
 }
 

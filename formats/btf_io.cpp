@@ -37,7 +37,7 @@ Result<Btf> read_btf(const std::string& path) {
 
 Result<std::unique_ptr<Model>> open_model(const std::string& path) {
   std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) return io_error(path + ": no such file");
+  if (!std::filesystem::is_regular_file(path, ec)) return io_error(path + ": no such file or directory");
   if (is_bonn_btf(path)) return open_bonn_model(path);
   BTFC_ASSIGN_OR_RETURN(ContainerReader rd, ContainerReader::open(path));
   return load_model(rd);

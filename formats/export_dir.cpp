@@ -44,7 +44,10 @@ Status write_preview(const GpuTexture& t, const fs::path& dir) {
 }  // namespace
 
 Status write_export_dir(const ExportBundle& b, const std::string& dir, bool previews) {
-  const fs::path final_dir(dir);
+  // "gpu/" names the directory gpu: without the slash the temporary is a sibling, not a child.
+  std::string name = dir;
+  while (name.size() > 1 && name.back() == '/') name.pop_back();
+  const fs::path final_dir(name);
   std::error_code ec;
   if (fs::exists(final_dir, ec) && !fs::is_directory(final_dir, ec))
     return io_error(dir + ": exists and is not a directory");

@@ -83,6 +83,45 @@ DirectionSet make_set(const std::set<Angles>& names, std::map<Angles, int>& inde
   return s;
 }
 
+bool g_allow_partial = false;
+
+// A direction set that is most of a standard sampling (UBO2003 81, UBO2014 151) but not all of
+// it is almost certainly an image set with images missing: named, and refused unless
+// --allow-partial (then read as the custom set of what is present).
+Status check_complete(const std::string& path, const std::set<Angles>& names, const char* what) {
+  for (const DirectionSet& full : {DirectionSet::ubo2003(), DirectionSet::ubo2014()}) {
+    if (names.size() >= full.size() || names.size() * 2 <= full.size()) continue;
+    std::vector<int> seen(full.size(), 0);
+    bool subset = true;
+    for (const Angles& a : names) {
+      const int i = full.find(to_dir(a), 0.5 * k_pi / 180.0);
+      if (i < 0) {
+        subset = false;
+        break;
+      }
+      seen[size_t(i)] = 1;
+    }
+    if (!subset) continue;
+    std::string missing;
+    size_t n = 0;
+    for (size_t i = 0; i < full.size(); ++i) {
+      if (seen[i]) continue;
+      const Vec3& d = full.dirs[i];
+      const int th = int(std::lround(std::acos(std::clamp(double(d.z), -1.0, 1.0)) * 180 / k_pi));
+      const int ph = (int(std::lround(std::atan2(double(d.y), double(d.x)) * 180 / k_pi)) + 360) % 360;
+      char buf[32];
+      std::snprintf(buf, sizeof buf, "%st%c%03d p%c%03d", n ? ", " : "", what[0], th, what[0], th == 0 ? 0 : ph);
+      if (++n <= 12) missing += buf;
+    }
+    if (n > 12) missing += ", ... (" + std::to_string(n - 12) + " more)";
+    const std::string msg = path + ": incomplete image set: " + std::to_string(n) + " of the " + std::to_string(full.size()) + " " +
+                            full.name + " " + what + " directions have no image: " + missing;
+    if (!g_allow_partial) return corrupt_data(msg + " (--allow-partial reads the " + std::to_string(names.size()) + " present as a custom set)");
+    std::fprintf(stderr, "warning: %s; read as a custom set of %zu (--allow-partial)\n", msg.c_str(), names.size());
+  }
+  return {};
+}
+
 struct ImageFile {
   fs::path path;
   int l = 0, v = 0;
@@ -194,11 +233,11 @@ Status plan_impl(const std::string& path, BtfDesc& desc, std::vector<ImageFile>&
   std::error_code ec;
   const fs::path dir(path);
   if (!fs::exists(dir, ec)) return io_error(path + ": no such file or directory");
-  if (!fs::is_directory(dir, ec)) return invalid_argument(path + ": not an image-set directory (not a directory)");
+  if (!fs::is_directory(dir, ec)) return corrupt_data(path + ": not an image-set directory (not a directory)");
   std::vector<std::pair<fs::path, ImageName>> named;
   BTFC_RETURN_IF_ERROR(list_images(dir, named));
   if (named.empty())
-    return invalid_argument(path + ": not an image set: no files named '... tlTTT plPPP tvTTT pvPPP.jpg|png|exr|hdr' "
+    return corrupt_data(path + ": not an image set: no files named '... tlTTT plPPP tvTTT pvPPP.jpg|png|exr|hdr' "
                                    "in it or in tvTTT_pvPPP subfolders");
 
   std::set<Angles> light_names, view_names;
@@ -210,6 +249,8 @@ Status plan_impl(const std::string& path, BtfDesc& desc, std::vector<ImageFile>&
   desc = BtfDesc{};
   desc.channels = 3;
   for (const auto& [p, n] : named) desc.hdr = desc.hdr || is_linear_format(p);
+  BTFC_RETURN_IF_ERROR(check_complete(path, light_names, "light"));
+  BTFC_RETURN_IF_ERROR(check_complete(path, view_names, "view"));
   desc.lights = make_set(light_names, li);
   desc.views = make_set(view_names, vi);
 
@@ -287,6 +328,8 @@ Result<Btf> read_impl(const std::string& path) {
 }
 
 }  // namespace
+
+void set_allow_partial_image_sets(bool allow) { g_allow_partial = allow; }
 
 Result<ImageName> parse_image_name(const std::string& filename) {
   // Angles at the end of the name; each separator may be ' ' (UBO2003) or '_' (UTIA). Anything

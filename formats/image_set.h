@@ -7,7 +7,7 @@
 //
 // Contracts:
 //  - 8-bit images are sRGB-decoded to linear float; EXR/HDR values are kept linear (desc.hdr).
-//  - Partial sets are accepted: the light set is the sorted union of lights seen, the view set
+//  - Subsets are accepted (but see set_allow_partial_image_sets): the light set is the sorted union of lights seen, the view set
 //    the union of views; every (light, view) pair of that product must have exactly one image,
 //    otherwise the error names the first missing pair. Sets equal to the UBO2003 81 sampling get
 //    its index order (ring, then phi) and name.
@@ -38,6 +38,10 @@ bool is_view_folder_name(const std::string& name);
 bool is_image_set(const std::string& path);
 
 Result<Btf> read_image_set(const std::string& path);
+// A set whose lights (or views) are most but not all of UBO2003 / UBO2014 is refused as
+// incomplete, naming the missing directions, unless this is set (btfc --allow-partial): then it
+// is read as the custom set of what is present, with a warning on stderr.
+void set_allow_partial_image_sets(bool allow);
 
 // Streaming (out-of-core) reading: the set's shape and its image files in BTF row order
 // (image i = light + nL * view), checked as read_image_set checks them, without the pixels.
