@@ -3,7 +3,9 @@
 //     maximum (contiguous reads, OpenMP reduction over texels);
 //  2. with SSIM, the images in parallel: a batch of consecutive images is converted to
 //     luminance into contiguous buffers, then each image pair is scored by ssim_gray.
-// Pass 2 needs the peak (the SSIM dynamic range) that pass 1 finds, so they cannot be fused.
+// Pass 2 needs the LDR/HDR decision and the BTF-wide peak (the fallback range of an all-zero
+// image) that pass 1 finds, so they cannot be fused. Each image's own range (its reference
+// luminance maximum) is found while its luminance is extracted.
 //
 // SSIM window rule, precisely. Per axis of n pixels the window radius is r = min(5, (n-1)/2),
 // i.e. the window extent is 11 or, for n < 11, the largest odd size <= n (so a 17 x 7 image
@@ -125,8 +127,18 @@ void extract_luminance(const ImageView& first, size_t cnt, float* out, size_t ou
   }
 }
 
-// Mean SSIM over all (light, view) images of two same-shape BTFs.
-double mean_ssim(const Btf& ref, const Btf& test, double L) {
+// Maximum of n luminance values (-inf for n = 0).
+float max_of(const float* y, size_t n) {
+  float m = -std::numeric_limits<float>::infinity();
+#pragma omp simd reduction(max : m)
+  for (size_t i = 0; i < n; ++i) m = y[i] > m ? y[i] : m;
+  return m;
+}
+
+// Mean SSIM over all (light, view) images of two same-shape BTFs. Dynamic range per image:
+// `fixed_L` when > 0 (LDR data), else that reference image's luminance maximum, or `fallback_L`
+// when the maximum is <= 0 (an all-zero / all-black image). core/metrics.h says why.
+double mean_ssim(const Btf& ref, const Btf& test, double fixed_L, double fallback_L) {
   const BtfDesc& d = ref.desc();
   const size_t n_img = d.num_images(), n_tex = d.num_texels(), n_lights = d.num_lights();
   // Consecutive image indices (l + n_lights * v) are adjacent within each texel's ABRDF, so
@@ -146,7 +158,14 @@ double mean_ssim(const Btf& ref, const Btf& test, double L) {
       const size_t i0 = size_t(bi) * batch, cnt = std::min(batch, n_img - i0);
       extract_luminance(ref.image(i0 % n_lights, i0 / n_lights), cnt, ya.data(), ps);
       extract_luminance(test.image(i0 % n_lights, i0 / n_lights), cnt, yb.data(), ps);
-      for (size_t k = 0; k < cnt; ++k) s[i0 + k] = ssim_gray(&ya[k * ps], &yb[k * ps], d.width, d.height, L);
+      for (size_t k = 0; k < cnt; ++k) {
+        double L = fixed_L;
+        if (!(L > 0)) {
+          const double mx = max_of(&ya[k * ps], n_tex);
+          L = mx > 0 ? mx : fallback_L;
+        }
+        s[i0 + k] = ssim_gray(&ya[k * ps], &yb[k * ps], d.width, d.height, L);
+      }
     }
   }
   double sum = 0;
@@ -229,7 +248,8 @@ Result<Metrics> compare_btf(const Btf& reference, const Btf& test, bool with_ssi
   const bool ldr = !d.hdr && max_ref <= 1.0;
   m.peak = ldr ? 1.0 : (max_ref > 0 ? max_ref : 1.0);
   m.psnr = m.rmse == 0 ? inf : 20.0 * std::log10(m.peak / m.rmse);
-  if (with_ssim) m.mean_ssim = mean_ssim(reference, test, m.peak);  // else left at the default
+  m.ssim_range = ldr ? Metrics::SsimRange::ldr_one : Metrics::SsimRange::per_image_max;
+  if (with_ssim) m.mean_ssim = mean_ssim(reference, test, ldr ? 1.0 : 0.0, m.peak);  // else left at the default
   return m;
 }
 

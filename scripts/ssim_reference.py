@@ -53,6 +53,9 @@ PAIRS = [
     ("small_7x9", 7, 9, f_odd, lambda i, j: 0.9 * f_odd(i, j) + 0.03 * math.sin(2.1 * i) * math.cos(1.7 * j), 1.0),
     ("thin_5x30", 5, 30, f_smooth, lambda i, j: f_smooth(i, j) + 0.05 * math.sin(1.3 * i + 0.7 * j), 1.0),
     ("column_30x1", 30, 1, f_odd, lambda i, j: 0.8 * f_odd(i, j) + 0.05, 1.0),
+    # data_range None: the reference image's own maximum, core/metrics.h's rule for HDR images
+    # (tests/metrics_test.cpp scores it through compare_btf on a 1-image HDR BTF).
+    ("hdr_own_range", 29, 32, f_hdr, lambda i, j: f_hdr(i, j) + 40.0 * math.sin(0.9 * i + 1.1 * j), None),
 ]
 
 
@@ -89,6 +92,8 @@ def main():
     print(f"// scikit-image {skimage.__version__}, numpy {np.__version__}")
     for name, h, w, fa, fb, L in PAIRS:
         a, b = make(h, w, fa), make(h, w, fb)
+        if L is None:
+            L = float(a.max())
         own = ssim_clipped(a, b, L)
         if min(h, w) >= 2 * RADIUS + 1:
             ref = structural_similarity(a, b, gaussian_weights=True, sigma=SIGMA,

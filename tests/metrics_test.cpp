@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <omp.h>
 
+#include <algorithm>
 #include <cmath>
 #include <functional>
 #include <limits>
@@ -191,7 +192,10 @@ TEST(Metrics, PeakRule) {
     ASSERT_TRUE(m.ok());
     EXPECT_DOUBLE_EQ(m->peak, c.expected_peak) << c.hdr << " " << c.max_value;
     EXPECT_NEAR(m->psnr, 20.0 * std::log10(c.expected_peak / m->rmse), 1e-9);
-    // SSIM uses the same peak as its dynamic range.
+    // SSIM range: 1 for LDR data; for HDR data each reference image's luminance maximum, the
+    // BTF-wide peak when that is <= 0.
+    const bool ldr = !c.hdr && c.max_value <= 1.0f;
+    EXPECT_EQ(m->ssim_range, ldr ? Metrics::SsimRange::ldr_one : Metrics::SsimRange::per_image_max);
     std::vector<float> ya(a.desc().num_texels()), yb(ya.size());
     double sum = 0;
     for (size_t l = 0; l < 2; ++l) {
@@ -200,10 +204,49 @@ TEST(Metrics, PeakRule) {
           ya[x + 12 * y] = float(0.2126 * a.at(x, y, l, 0, 0) + 0.7152 * a.at(x, y, l, 0, 1) + 0.0722 * a.at(x, y, l, 0, 2));
           yb[x + 12 * y] = float(0.2126 * b.at(x, y, l, 0, 0) + 0.7152 * b.at(x, y, l, 0, 1) + 0.0722 * b.at(x, y, l, 0, 2));
         }
-      sum += ssim_gray(ya.data(), yb.data(), 12, 11, c.expected_peak);
+      double L = 1.0;
+      if (!ldr) {
+        const double mx = *std::max_element(ya.begin(), ya.end());
+        L = mx > 0 ? mx : c.expected_peak;
+      }
+      sum += ssim_gray(ya.data(), yb.data(), 12, 11, L);
     }
     EXPECT_NEAR(m->mean_ssim, sum / 2, 1e-12);
   }
+}
+
+// Two-sided check of the per-image range against scikit-image: one HDR image (the "hdr" pair of
+// scripts/ssim_reference.py) as a 1-light, 1-view, 1-channel BTF. scikit-image 0.19.3 with
+// data_range = the reference's maximum (947.716) gives 0.9697431350360517 ("hdr_own_range");
+// the global-range value of the same pair at L = 1000 is 0.9698795, so a tolerance of 1e-6
+// tells the two rules apart.
+TEST(Metrics, HdrSsimUsesEachImagesMaximumLikeScikitImage) {
+  const int h = 29, w = 32;
+  Btf a = make_btf(make_desc(w, h, 1, 1, 1, true));
+  Btf b = make_btf(a.desc());
+  for (int i = 0; i < h; ++i)
+    for (int j = 0; j < w; ++j) {
+      a.at(j, i, 0, 0, 0) = float(f_hdr(i, j));
+      b.at(j, i, 0, 0, 0) = float(f_hdr(i, j) + 40.0 * std::sin(0.9 * i + 1.1 * j));
+    }
+  auto m = compare_btf(a, b);
+  ASSERT_TRUE(m.ok());
+  EXPECT_EQ(m->ssim_range, Metrics::SsimRange::per_image_max);
+  EXPECT_NEAR(m->mean_ssim, 0.9697431350360517, 1e-6);
+  // Two images of very different brightness: each is scored against its own range, so a dim
+  // image's error counts as much as a bright one's (a global range would hide it).
+  Btf c = make_btf(make_desc(w, h, 2, 1, 1, true));
+  Btf d = make_btf(c.desc());
+  for (int i = 0; i < h; ++i)
+    for (int j = 0; j < w; ++j)
+      for (size_t l = 0; l < 2; ++l) {
+        const double s = l == 0 ? 1.0 : 0.01;
+        c.at(j, i, l, 0, 0) = float(s * f_hdr(i, j));
+        d.at(j, i, l, 0, 0) = float(s * (f_hdr(i, j) + 40.0 * std::sin(0.9 * i + 1.1 * j)));
+      }
+  auto n = compare_btf(c, d);
+  ASSERT_TRUE(n.ok());
+  EXPECT_NEAR(n->mean_ssim, 0.9697431350360517, 1e-5);
 }
 
 // --- errors ---------------------------------------------------------------------------------
