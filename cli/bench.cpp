@@ -27,7 +27,7 @@ json num(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
 
 const char* k_csv_columns =
     "data,spec_given,spec,payload_bytes,ratio,bits_per_value,rmse,rel_l2,psnr,mean_ssim,render_ssim,encode_s,decode_s,"
-    "evals_per_s,peak_rss_mb,tensor_digest,device,btfc_version,machine,command";
+    "evals_per_s,peak_rss_mb,tensor_digest,device,btfc_version,machine,command,file_bytes";
 
 std::string csv_field(const std::string& s) {
   if (s.find_first_of(",\"\n") == std::string::npos) return s;
@@ -113,7 +113,7 @@ int cmd_bench(const Global& g, const BenchArgs& a) {
     BenchResult& b = r.value();
     const double peak_mb = double(b.peak_rss_bytes) / (1 << 20);
     rows.push_back({{"data", label}, {"spec_given", b.spec_given}, {"spec", b.spec}, {"payload_bytes", b.payload_bytes},
-                    {"ratio", b.ratio}, {"bits_per_value", b.bits_per_value}, {"rmse", b.metrics.rmse},
+                    {"file_bytes", b.file_bytes}, {"ratio", b.ratio}, {"bits_per_value", b.bits_per_value}, {"rmse", b.metrics.rmse},
                     {"rel_l2", num(b.metrics.rel_l2)}, {"psnr", num(b.metrics.psnr)}, {"psnr_peak", b.metrics.peak},
                     {"mean_ssim", b.metrics.mean_ssim}, {"render_ssim", a.no_renders ? json(nullptr) : json(b.render_ssim)},
                     {"encode_seconds", b.encode_seconds}, {"decode_seconds", b.decode_seconds},
@@ -176,7 +176,7 @@ int cmd_bench(const Global& g, const BenchArgs& a) {
         << (r["render_ssim"].is_null() ? "" : csv_num(r["render_ssim"])) << ',' << csv_num(r["encode_seconds"]) << ','
         << csv_num(r["decode_seconds"]) << ',' << csv_num(r["evals_per_second"]) << ',' << csv_num(r["peak_rss_mb"]) << ','
         << r["tensor_digest"].get<uint32_t>() << ',' << csv_field(r["device"]) << ',' << BTFC_VERSION << ','
-        << csv_field(machine) << ',' << csv_field(g.command_line) << "\n";
+        << csv_field(machine) << ',' << csv_field(g.command_line) << ',' << r["file_bytes"].get<uint64_t>() << "\n";
     }
     if (!f) return fail(g, io_error(a.csv + ": cannot write"));
   }

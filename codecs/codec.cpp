@@ -28,6 +28,15 @@ static std::string stats_text(const ModelStats& st) {
   return os.str();
 }
 
+Result<uint64_t> model_file_bytes(const Model& model, const Codec& codec) {
+  ContainerWriter w;
+  w.set_desc(model.desc());
+  w.set_codec({codec.name(), codec.payload_version(), model.spec(), btfc_version()});
+  BTFC_RETURN_IF_ERROR(model.save(w));
+  w.set_stats(stats_text(model.stats()));
+  return w.file_size();
+}
+
 Status save_model(const Model& model, const Codec& codec, const std::string& path) {
   ContainerWriter w;
   w.set_desc(model.desc());
@@ -45,7 +54,18 @@ Result<std::unique_ptr<Model>> load_model(const ContainerReader& reader) {
   // Loaders hold every tensor in memory as float (half payloads double), so the model needs
   // about this much; refuse before any codec allocates (core/limits.h).
   uint64_t need = 0;
-  for (const TensorInfo& t : reader.tensors()) need += t.size / dtype_size(t.dtype) * std::max<uint64_t>(4, dtype_size(t.dtype));
+  for (const TensorInfo& t : reader.tensors()) {
+    if (t.dtype != DType::zq) {
+      need += t.size / dtype_size(t.dtype) * std::max<uint64_t>(4, dtype_size(t.dtype));
+      continue;
+    }
+    // A zq tensor decodes to floats (plus its integers while decoding): its declared element
+    // count, saturating, so a hostile shape is refused here before anything is allocated.
+    uint64_t n = 8;
+    for (uint64_t d : t.shape)
+      if (__builtin_mul_overflow(n, d, &n)) n = UINT64_MAX / 2;
+    need = n > UINT64_MAX / 2 - need ? UINT64_MAX / 2 : need + n + t.size;
+  }
   BTFC_RETURN_IF_ERROR(check_memory(size_t(need), reader.path() + ": loading the " + name + " model"));
   return codec->load(reader);
 }

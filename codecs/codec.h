@@ -97,6 +97,11 @@ class Codec {
   virtual Result<std::unique_ptr<Model>> encode(const Btf& btf, const Params& params, Context& ctx) const = 0;
   // Rebuilds a model from a container; rejects payload versions newer than payload_version().
   virtual Result<std::unique_ptr<Model>> load(const ContainerReader& reader) const = 0;
+  // Settings a byte-budget search (codecs/target.h) tries besides the knob: each a spec fragment
+  // ("precision=q:bits=6") laid over the spec; keys the user's spec sets are never overridden.
+  // For each the knob is searched and the most accurate (PSNR) model that fits wins. Empty: the
+  // knob alone.
+  virtual std::vector<std::string> budget_variants() const { return {}; }
 };
 
 // The explicit codec table.
@@ -108,6 +113,8 @@ Result<std::pair<const Codec*, Params>> resolve_spec(const std::string& spec);
 
 // Saves a model as a .btfc (DESC + CODC + tensors + STAT), atomically.
 Status save_model(const Model& model, const Codec& codec, const std::string& path);
+// The bytes save_model would write (container framing and statistics included).
+Result<uint64_t> model_file_bytes(const Model& model, const Codec& codec);
 // Opens a .btfc holding a model (codec != "raw").
 Result<std::unique_ptr<Model>> load_model(const ContainerReader& reader);
 

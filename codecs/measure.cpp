@@ -113,6 +113,7 @@ Result<BenchResult> run_benchmark(const Btf& btf, const std::string& spec, const
     BTFC_ASSIGN_OR_RETURN(r.metrics, compare_btf(btf, decoded, true));
   }
   r.payload_bytes = r.model->payload_bytes();
+  BTFC_ASSIGN_OR_RETURN(r.file_bytes, model_file_bytes(*r.model, *codec));
   const double values = double(btf.desc().num_values());
   r.ratio = r.payload_bytes ? values * 4.0 / double(r.payload_bytes) : 0;
   r.bits_per_value = double(r.payload_bytes) * 8.0 / values;

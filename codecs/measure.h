@@ -2,7 +2,7 @@
 // their own data rather than guess.
 //
 // One run = encode with a spec string, decode everything, compare, render, time random
-// evaluations. Reported per run: payload bytes, ratio (float32 input bytes / payload bytes) and
+// evaluations. Reported per run: payload bytes, the .btfc file's bytes, ratio (float32 input bytes / payload bytes) and
 // bits per value, RMSE, relative L2, PSNR and mean SSIM over the BTF's images (core/metrics.h),
 // mean SSIM over rendered images (codecs/render.h: the standard scenes below), encode and decode
 // wall time, interpolated random evaluations per second (Model::eval_batch), the process's peak
@@ -39,6 +39,7 @@ struct BenchOptions {
 struct BenchResult {
   std::string spec_given, spec;  // as given, and canonical (every key)
   uint64_t payload_bytes = 0;
+  uint64_t file_bytes = 0;  // the .btfc save_model writes: payload + container framing + statistics
   double ratio = 0, bits_per_value = 0;
   Metrics metrics;
   double render_ssim = 0;  // mean over standard_renders()

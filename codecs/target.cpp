@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <optional>
 
 #include "core/metrics.h"
 
@@ -82,10 +83,10 @@ const ParamSpec* quality_knob(const Codec& codec) {
   return nullptr;
 }
 
-Result<TargetChoice> choose_for_target(const Btf& btf, const std::string& spec, const Target& target, Context& ctx) {
-  if (!std::isfinite(target.value) || (target.kind == Target::Kind::ssim && (target.value <= 0 || target.value > 1)) ||
-      (target.kind == Target::Kind::max_bytes && target.value < 1))
-    return invalid_argument("target " + std::string(kind_name(target.kind)) + " " + std::to_string(target.value) + " is out of range");
+namespace {
+
+// The knob search for one spec (the contract in target.h).
+Result<TargetChoice> search_knob(const Btf& btf, const std::string& spec, const Target& target, Context& ctx) {
   BTFC_ASSIGN_OR_RETURN(auto resolved, resolve_spec(spec));  // validates the rest of the spec
   const Codec& codec = *resolved.first;
   const ParamSpec* knob = quality_knob(codec);
@@ -102,7 +103,23 @@ Result<TargetChoice> choose_for_target(const Btf& btf, const std::string& spec, 
   auto g = [&](const TargetProbe& q) { return q.meets == quality; };
   long long lo = lo_end - 1, hi = hi_end + 1;
   BTFC_ASSIGN_OR_RETURN(TargetProbe p, s.probe(start));
-  if (g(p)) {
+  if (!quality && p.measure > 0 && knob->type == ParamSpec::Type::integer) {
+    // Bytes grow about linearly with the knob: probe the estimate of the budget first, so the
+    // bracketing below starts next to it (each probe is an encode).
+    const long long est = std::clamp((long long)std::floor(double(start) * target.value / p.measure), lo_end, hi_end);
+    if (!g(p) && est > start + 1) {
+      BTFC_ASSIGN_OR_RETURN(TargetProbe q, s.probe(est));
+      if (g(q)) lo = start, hi = est;
+      else start = est, p = q;
+    } else if (g(p) && est < start) {
+      BTFC_ASSIGN_OR_RETURN(TargetProbe q, s.probe(est));
+      if (g(q)) start = est, p = q;
+      else lo = est, hi = start;
+    }
+  }
+  if (hi <= hi_end) {
+    // bracketed by the estimate
+  } else if (g(p)) {
     hi = start;
   } else {
     lo = start;
@@ -144,6 +161,63 @@ Result<TargetChoice> choose_for_target(const Btf& btf, const std::string& spec, 
   c.spec = c.model->spec();
   c.probes = std::move(s.probes);
   return c;
+}
+
+// spec with the fragment's keys set, unless the spec sets them itself ("" when it does).
+std::string apply_variant(const SpecString& base, const std::string& fragment) {
+  auto frag = parse_spec_string(base.codec + ":" + fragment);
+  if (!frag.ok()) return "";
+  std::string out = base.codec;
+  for (const auto& [k, v] : base.values) out += ":" + k + "=" + v;
+  for (const auto& [k, v] : frag.value().values) {
+    for (const auto& [bk, bv] : base.values)
+      if (bk == k) return bv == v ? out : "";
+    out += ":" + k + "=" + v;
+  }
+  return out;
+}
+
+}  // namespace
+
+Result<TargetChoice> choose_for_target(const Btf& btf, const std::string& spec, const Target& target, Context& ctx) {
+  if (!std::isfinite(target.value) || (target.kind == Target::Kind::ssim && (target.value <= 0 || target.value > 1)) ||
+      (target.kind == Target::Kind::max_bytes && target.value < 1))
+    return invalid_argument("target " + std::string(kind_name(target.kind)) + " " + std::to_string(target.value) + " is out of range");
+  BTFC_ASSIGN_OR_RETURN(auto resolved, resolve_spec(spec));
+  const std::vector<std::string> variants = resolved.first->budget_variants();
+  if (target.kind != Target::Kind::max_bytes || variants.empty()) return search_knob(btf, spec, target, ctx);
+  // A byte budget over the codec's settings: the knob per setting, then the best PSNR.
+  BTFC_ASSIGN_OR_RETURN(SpecString base, parse_spec_string(spec));
+  std::vector<std::string> specs;
+  for (const std::string& v : variants) {
+    const std::string s = apply_variant(base, v);
+    if (!s.empty() && std::find(specs.begin(), specs.end(), s) == specs.end()) specs.push_back(s);
+  }
+  if (specs.empty()) return search_knob(btf, spec, target, ctx);
+  std::optional<TargetChoice> best;
+  Status last;
+  std::vector<TargetProbe> probes;
+  std::string tried;
+  for (const std::string& s : specs) {
+    auto c = search_knob(btf, s, target, ctx);
+    if (!c.ok()) {
+      last = c.status();
+      continue;
+    }
+    Btf decoded;
+    BTFC_RETURN_IF_ERROR(c->model->decode_all(decoded));
+    BTFC_ASSIGN_OR_RETURN(Metrics m, compare_btf(btf, decoded, false));
+    for (const TargetProbe& p : c->probes) probes.push_back(p);
+    char buf[64];
+    std::snprintf(buf, sizeof buf, " %.3f dB;", m.psnr);
+    tried += " " + c->spec + ":" + buf;
+    c->psnr = m.psnr;
+    if (!best || m.psnr > best->psnr) best = std::move(c).value();
+  }
+  if (!best) return last;
+  best->probes = std::move(probes);
+  best->variants = tried;
+  return std::move(*best);
 }
 
 }  // namespace btfc

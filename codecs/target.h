@@ -9,7 +9,9 @@
 // measure is monotone: the chosen setting meets the target and the next cheaper one (knob - 1
 // step) does not, or it is the knob's cheapest setting. A target that even the most accurate
 // setting misses (or a budget the cheapest one exceeds) is an error that reports the best reached.
-// The other parameters of the spec are kept as given.
+// The other parameters of the spec are kept as given. A byte budget for a codec with
+// budget_variants() (fmf: precision half and q at several bit depths) runs that search per
+// variant and keeps the fitting model of the highest PSNR; keys the spec sets are not varied.
 #pragma once
 #include <memory>
 #include <string>
@@ -37,6 +39,10 @@ struct TargetChoice {
   double measure = 0;              // what it reached
   std::vector<TargetProbe> probes;  // in the order tried
   std::unique_ptr<Model> model;
+  // A byte budget over Codec::budget_variants(): the chosen model's PSNR, and every setting's
+  // best fit with its PSNR ("spec: 41.2 dB; ...").
+  double psnr = 0;
+  std::string variants;
 };
 
 // The codec's quality knob, or nullptr when it declares none.

@@ -4,6 +4,7 @@
 // dumping structs, so the layout does not depend on the compiler. Only raw tensor data is
 // copied straight from memory, which is why this file requires a little-endian host.
 #include "core/container.h"
+#include "core/quant.h"
 
 #include <Imath/half.h>
 #include <sys/stat.h>
@@ -233,7 +234,7 @@ Status get_tensor_head(Cursor& c, const std::string& path, uint64_t size, Tensor
   BTFC_RETURN_IF_ERROR(c.uint(ndims, "ndims"));
   BTFC_RETURN_IF_ERROR(c.uint(res, "reserved"));
   ti.dtype = DType(dt);
-  if (dtype_size(ti.dtype) == 0) return c.error("unknown dtype " + std::to_string(dt));
+  if (!dtype_known(ti.dtype)) return c.error("unknown dtype " + std::to_string(dt));
   if (ndims > k_max_ndims) return c.error("ndims " + std::to_string(ndims) + " exceeds 8");
   if (res != 0) return c.error("reserved field is not zero");
   ti.shape.resize(ndims);
@@ -242,6 +243,11 @@ Status get_tensor_head(Cursor& c, const std::string& path, uint64_t size, Tensor
   ti.size = size - c.pos();
   uint64_t need;
   const std::string what = "dims " + shape_str(ti.shape) + " " + dtype_name(ti.dtype);
+  if (ti.dtype == DType::zq) {  // variable size: only the element count is checked here, the rest at read
+    if (ti.shape.empty() || !tensor_bytes(ti.shape, DType::u8, need)) return c.error(what + ": zq needs dims whose product fits 64 bits");
+    if (ti.size < 32) return c.error(what + ": zq data of " + std::to_string(ti.size) + " bytes is shorter than its header");
+    return {};
+  }
   if (!tensor_bytes(ti.shape, ti.dtype, need)) return c.error(what + " overflow 64 bits");
   if (need != ti.size)
     return c.error(what + " need " + std::to_string(need) + " bytes, chunk holds " + std::to_string(ti.size));
@@ -328,9 +334,17 @@ Result<std::vector<PlannedChunk>> plan_chunks(const BtfDesc& desc, const CodecIn
     BTFC_RETURN_IF_ERROR(check_string(*t.name, ctx + " name"));
     if (std::find(names.begin(), names.end(), *t.name) != names.end()) return invalid_argument(ctx + ": duplicate tensor name");
     names.push_back(*t.name);
-    if (dtype_size(t.dtype) == 0) return invalid_argument(ctx + ": invalid dtype " + std::to_string(int(t.dtype)));
+    if (!dtype_known(t.dtype)) return invalid_argument(ctx + ": invalid dtype " + std::to_string(int(t.dtype)));
     if (t.shape->size() > k_max_ndims) return invalid_argument(ctx + ": " + std::to_string(t.shape->size()) + " dims, at most 8");
     uint64_t bytes;
+    if (t.dtype == DType::zq) {  // an encoded payload: only owned tensors, header consistent with dims
+      if (!t.owned) return invalid_argument(ctx + ": zq tensors are written from a Tensor, not a view or stream");
+      Status s = quant::check_header(static_cast<const uint8_t*>(t.data), t.owned_size, *t.shape, ctx);
+      if (!s.ok()) return invalid_argument(s.message());
+      out.push_back({k_tnsr, k_flag_critical, tensor_head(*t.name, t.dtype, *t.shape), static_cast<const uint8_t*>(t.data), t.owned_size,
+                     t.fill, t.piece});
+      continue;
+    }
     if (!tensor_bytes(*t.shape, t.dtype, bytes)) return invalid_argument(ctx + ": dims " + shape_str(*t.shape) + " overflow");
     if (t.owned && t.owned_size != bytes)
       return invalid_argument(ctx + ": dims " + shape_str(*t.shape) + " " + dtype_name(t.dtype) + " need " +
@@ -405,9 +419,10 @@ Status crc_check(uint32_t stored, uint32_t computed, const std::string& ctx) {
 static constexpr struct {
   const char* name;
   size_t size;
-} k_dtypes[] = {{"invalid", 0}, {"f32", 4}, {"f16", 2}, {"u8", 1}, {"u16", 2}, {"u32", 4}, {"i32", 4}, {"f64", 8}};
+} k_dtypes[] = {{"invalid", 0}, {"f32", 4}, {"f16", 2}, {"u8", 1}, {"u16", 2}, {"u32", 4}, {"i32", 4}, {"f64", 8}, {"zq", 0}};
 
 size_t dtype_size(DType t) { return size_t(t) < std::size(k_dtypes) ? k_dtypes[size_t(t)].size : 0; }
+bool dtype_known(DType t) { return dtype_size(t) != 0 || t == DType::zq; }
 const char* dtype_name(DType t) { return size_t(t) < std::size(k_dtypes) ? k_dtypes[size_t(t)].name : "invalid"; }
 
 uint64_t Tensor::count() const {
@@ -432,6 +447,7 @@ Tensor Tensor::from_u32(std::string name, std::vector<uint64_t> shape, const uin
 }
 
 Result<std::vector<float>> Tensor::to_f32() const {
+  if (dtype == DType::zq) return quant::decode(*this, "tensor '" + name + "'");
   uint64_t need;
   if (!tensor_bytes(shape, dtype, need) || need != bytes.size())
     return invalid_argument("tensor '" + name + "': dims " + shape_str(shape) + " " + dtype_name(dtype) +
@@ -768,6 +784,17 @@ Result<Tensor> ContainerReader::read_checked(const std::string& name, DType dtyp
     return corrupt_data(m_path + ": chunk TNSR '" + name + "': is " + dtype_name(ti->dtype) + " " + shape_str(ti->shape) +
                         ", expected " + dtype_name(dtype) + " " + (shape.empty() ? "(any shape)" : shape_str(shape)));
   return read(name);
+}
+
+Result<std::vector<float>> ContainerReader::read_floats(const std::string& name, const std::vector<uint64_t>& shape) const {
+  const TensorInfo* ti = find(name);
+  if (!ti) return corrupt_data(m_path + ": missing tensor '" + name + "'");
+  if ((ti->dtype != DType::f32 && ti->dtype != DType::f16 && ti->dtype != DType::zq) || ti->shape != shape)
+    return corrupt_data(m_path + ": chunk TNSR '" + name + "': is " + dtype_name(ti->dtype) + " " + shape_str(ti->shape) +
+                        ", expected f32, f16 or zq " + shape_str(shape));
+  BTFC_ASSIGN_OR_RETURN(Tensor t, read(name));
+  if (t.dtype == DType::zq) return quant::decode(t, m_path + ": chunk TNSR '" + name + "'");
+  return t.to_f32();
 }
 
 Status ContainerReader::verify_all() const {

@@ -30,8 +30,11 @@
 
 namespace btfc {
 
-enum class DType : uint8_t { f32 = 1, f16 = 2, u8 = 3, u16 = 4, u32 = 5, i32 = 6, f64 = 7 };
+// zq: quantized integers with per-column steps, zstd-coded (core/quant.h); its data size is not
+// dims x an element size, so dtype_size(zq) is 0 and dtype_known() tells valid codes.
+enum class DType : uint8_t { f32 = 1, f16 = 2, u8 = 3, u16 = 4, u32 = 5, i32 = 6, f64 = 7, zq = 8 };
 size_t dtype_size(DType t);
+bool dtype_known(DType t);
 const char* dtype_name(DType t);
 
 // A named, typed, shaped array. `bytes` holds the raw little-endian payload.
@@ -44,7 +47,7 @@ struct Tensor {
   uint64_t count() const;  // product of shape
   static Tensor from_f32(std::string name, std::vector<uint64_t> shape, const float* data);
   static Tensor from_u32(std::string name, std::vector<uint64_t> shape, const uint32_t* data);
-  // Converts f32 / f16 / f64 payloads to float; errors for integer dtypes.
+  // Converts f32 / f16 / f64 payloads to float, and decodes zq ones; errors for integer dtypes.
   Result<std::vector<float>> to_f32() const;
 };
 
@@ -128,6 +131,9 @@ class ContainerReader {
   Result<Tensor> read(const std::string& name) const;
   // Reads a tensor and checks its dtype and shape (an empty `shape` accepts any shape).
   Result<Tensor> read_checked(const std::string& name, DType dtype, const std::vector<uint64_t>& shape) const;
+  // Reads a float tensor of the given shape stored as f32, f16 or zq, as floats (checks shape and
+  // dtype; a zq tensor is decoded, with its errors naming the file and the tensor).
+  Result<std::vector<float>> read_floats(const std::string& name, const std::vector<uint64_t>& shape) const;
   // Streams a tensor's payload into dst (dst_bytes must equal its size), verifying the CRC.
   Status read_into(const std::string& name, void* dst, uint64_t dst_bytes) const;
   // Reads every tensor payload and checks its CRC (btfc info --verify).

@@ -8,7 +8,7 @@ PACKAGES=(
   build-essential cmake
   libeigen3-dev libopenexr-dev libopenimageio-dev openimageio-tools
   pocl-opencl-icd ocl-icd-opencl-dev opencl-headers opencl-clhpp-headers clinfo
-  libceres-dev libopenblas-dev zlib1g-dev libbz2-dev libcli11-dev nlohmann-json3-dev
+  libceres-dev libopenblas-dev zlib1g-dev libbz2-dev libzstd-dev libcli11-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   python3-numpy python3-skimage python3-matplotlib
   libopenmpi-dev openmpi-bin

@@ -11,10 +11,12 @@
 #include <mutex>
 
 #include "codecs/fmf/fmf_cl.h"
+#include "codecs/fmf/fmf_quant.h"
 #include "codecs/fmf/svd.h"
 #include "core/fixed_product.h"
 #include "core/cl_runtime.h"
 #include "core/interp.h"
+#include "core/quant.h"
 
 namespace btfc {
 namespace {
@@ -55,7 +57,10 @@ const ParamSpec k_params[] = {
     {"svd", ParamSpec::Type::choice, "auto", 0, 0, {"auto", "exact", "randomized"}, "auto: exact when the small side of the matrix is <= 1024, else randomized"},
     {"oversample", ParamSpec::Type::integer, "16", 0, 1024, {}, "randomized SVD: extra sketch columns"},
     {"power_iters", ParamSpec::Type::integer, "4", 0, 32, {}, "randomized SVD: power iterations"},
-    {"precision", ParamSpec::Type::choice, "half", 0, 0, {"half", "float"}, "storage of U and SxV"},
+    {"precision", ParamSpec::Type::choice, "half", 0, 0, {"half", "float", "q"},
+     "storage of U and SxV: half / float, or q = per-component quantized integers, zstd-coded (fmf_quant.h)"},
+    {"bits", ParamSpec::Type::integer, "8", 2, 20, {}, "precision=q: step = 2^-bits x RMS of the strongest eigen-texture (SxV column), U column k's step / sigma_k (equal error per component)"},
+    {"textures", ParamSpec::Type::choice, "plain", 0, 0, {"plain", "dct"}, "precision=q: SxV columns coded as integers (plain) or as 8x8 DCT coefficients of the eigen-texture images (dct)"},
     {"offset", ParamSpec::Type::real, "0", 0, 1e30, {}, "color=dfmf: luminance offset e of Y' = log(Y + e), U' = U / (Y + e); 0 = from the data (sum Y^2 / sum Y); 1e-5 = Bonn's colour model 11 exactly"},
 };
 
@@ -65,11 +70,13 @@ struct Block {
   MatrixXfR SxV;      // texels x C, dequantized (scale applied)
   Eigen::VectorXf S;  // C
   Eigen::VectorXf scale;
+  std::vector<Tensor> coded;  // precision=q: the zq tensors U.<b>, SxV.<b> as saved (fmf_quant.h)
 };
 
 struct Config {
   bool dfmf = false;
   bool half = true;
+  fmf::QuantConfig quant;  // precision=q (quant.bits > 0)
   // Bonn colour model of a model made from a Bonn file (make_fmf_model), when it is not the
   // mode's native one (dfmf: 11, rgb: 0); -1 = native. Non-native models decode on the CPU path
   // only and cannot be saved to .btfc.
@@ -86,7 +93,10 @@ void bonn_undecorrelate(const Config& cfg, const float* in, float* rgb);
 // A spec's offset 0 is "from the data" at encode; a model's spec holds the resolved value, so 0
 // there is a file from before the parameter existed: Bonn's 1e-5.
 Config config_from(const Params& p) {
-  Config c{p.get("color") == "dfmf", p.get("precision") == "half"};
+  Config c;
+  c.dfmf = p.get("color") == "dfmf";
+  c.half = p.get("precision") == "half";
+  if (p.get("precision") == "q") c.quant.bits = int(p.get_int("bits")), c.quant.dct = p.get("textures") == "dct";
   const double e = p.get_real("offset");
   c.offset = e > 0 ? float(e) : k_drr_eps;
   return c;
@@ -96,7 +106,11 @@ class FmfModel final : public Model {
  public:
   FmfModel(BtfDesc desc, std::string spec, Config cfg, std::vector<Block> blocks)
       : m_desc(std::move(desc)), m_spec(std::move(spec)), m_cfg(cfg), m_blocks(std::move(blocks)),
-        m_light_interp(m_desc.lights), m_view_interp(m_desc.views) {}
+        m_light_interp(m_desc.lights), m_view_interp(m_desc.views) {
+    if (m_cfg.quant.bits > 0)
+      for (Block& b : m_blocks)
+        if (b.coded.empty()) quantize_block(b);
+  }
 
   const BtfDesc& desc() const override { return m_desc; }
   const std::string& spec() const override { return m_spec; }
@@ -141,7 +155,14 @@ class FmfModel final : public Model {
   Status save(ContainerWriter& w) const override;
   uint64_t payload_bytes() const override {
     uint64_t bytes = 0, scalar = m_cfg.half ? 2 : 4;
-    for (const Block& b : m_blocks) bytes += scalar * uint64_t(b.U.size() + b.SxV.size()) + 8 * uint64_t(b.S.size());
+    for (const Block& b : m_blocks) {
+      if (!b.coded.empty()) {
+        for (const Tensor& t : b.coded) bytes += t.bytes.size();
+        bytes += 8 * uint64_t(b.S.size());
+        continue;
+      }
+      bytes += scalar * uint64_t(b.U.size() + b.SxV.size()) + 8 * uint64_t(b.S.size());
+    }
     return bytes;
   }
   ModelStats stats() const override { return m_stats; }
@@ -158,6 +179,17 @@ class FmfModel final : public Model {
   // The OpenCL kernels (kernels/fmf.cl) hard-code Bonn's offset 1e-5: other dfmf offsets decode
   // on the CPU path.
   bool native_eps() const { return !m_cfg.dfmf || m_cfg.offset == k_drr_eps; }
+
+  // precision=q: U and SxV become their zq tensors and the values those decode to
+  // (codecs/fmf/fmf_quant.h); the eigen-textures are width x height images for textures=dct.
+  void quantize_block(Block& b) {
+    fmf::QuantizedFactors q = fmf::quantize_factors(b.name, b.U, b.SxV, m_cfg.quant, m_desc.width, m_desc.height);
+    if (!q.status.ok()) m_quant_status = q.status;
+    b.U = std::move(q.U), b.SxV = std::move(q.SxV), b.coded = std::move(q.coded);
+    b.scale = Eigen::VectorXf::Ones(b.SxV.cols());
+  }
+  Status m_quant_status;  // a failed quantize_block: save() reports it
+
   // The factors in the OpenCL kernels' layout (codecs/fmf/fmf_cl.h), uploaded on first use.
   Result<std::shared_ptr<fmf_cl::DeviceFactors>> device_factors() const;
   fmf_cl::PackedFactors packed() const;
@@ -323,11 +355,18 @@ Status FmfModel::decode(const DecodeRequest& req, Btf& out) const {
 }
 
 Status FmfModel::save(ContainerWriter& w) const {
+  BTFC_RETURN_IF_ERROR(m_quant_status);
   if (m_cfg.color_model >= 0)
     return unsupported("fmf: a model with Bonn colour model " + std::to_string(m_cfg.color_model) +
                        " cannot be saved as .btfc (only 11 = color=dfmf and 0 = color=rgb); decompress and re-compress it instead");
   for (const Block& b : m_blocks) {
     const uint64_t rows = uint64_t(b.U.rows()), cols = uint64_t(b.U.cols()), texels = uint64_t(b.SxV.rows());
+    if (!b.coded.empty()) {  // precision=q: the zq tensors made when quantizing
+      for (const Tensor& t : b.coded) w.add_tensor(t);
+      w.add_tensor(Tensor::from_f32("scale." + b.name, {cols}, b.scale.data()));
+      w.add_tensor(Tensor::from_f32("S." + b.name, {cols}, b.S.data()));
+      continue;
+    }
     MatrixXfR sxv_scaled = b.SxV * b.scale.cwiseInverse().asDiagonal();
     auto put = [&](const std::string& name, const MatrixXfR& M, std::vector<uint64_t> shape) {
       if (!m_cfg.half) {
@@ -355,6 +394,7 @@ Status FmfModel::save(ContainerWriter& w) const {
 }
 
 // Rounds U and SxV to their storage precision, so the in-memory model is what the file holds.
+// (precision=q is float here: FmfModel's constructor quantizes it, knowing the texture size.)
 void quantize(Block& b, bool half) {
   b.scale.resize(b.SxV.cols());
   for (Index c = 0; c < b.SxV.cols(); ++c) {
@@ -372,7 +412,7 @@ void quantize(Block& b, bool half) {
 
 // A factorized block from an SVD result, quantised; its statistics go to `stats`.
 Block block_from_svd(const std::string& name, fmf::SvdResult r, bool half, int max_rank, double target, ModelStats& stats) {
-  Block b{name, std::move(r.U), std::move(r.SxV), r.S.cast<float>(), {}};
+  Block b{name, std::move(r.U), std::move(r.SxV), r.S.cast<float>(), {}, {}};
   quantize(b, half);
   const int kept = int(b.U.cols());
   stats.add("rank." + name, kept);
@@ -391,6 +431,12 @@ class FmfCodec final : public Codec {
   const char* summary() const override { return "full matrix factorization (truncated SVD), seed 000 section 4"; }
   uint32_t payload_version() const override { return k_payload_version; }
   std::span<const ParamSpec> params() const override { return k_params; }
+  // --max-bytes tries half floats and quantized factors at several bit depths (fmf_quant.h),
+  // the rank searched for each: at a byte budget the best rank / precision pair depends on how
+  // fast the data's singular values decay and how noisy it is.
+  std::vector<std::string> budget_variants() const override {
+    return {"precision=half", "precision=q:bits=4", "precision=q:bits=5", "precision=q:bits=6", "precision=q:bits=8"};
+  }
 
   Result<std::unique_ptr<Model>> encode(const Btf& btf, const Params& p, Context& ctx) const override {
     const BtfDesc& d = btf.desc();
@@ -531,12 +577,14 @@ class FmfCodec final : public Codec {
       if (!ti || ti->shape.size() != 2) return corrupt_data(rd.path() + ": fmf tensor 'U." + b + "' missing or not 2-D");
       const uint64_t C = ti->shape[1];
       if (C == 0 || C > 4096) return corrupt_data(rd.path() + ": fmf tensor 'U." + b + "' has " + std::to_string(C) + " components");
-      BTFC_ASSIGN_OR_RETURN(Tensor U, rd.read_checked("U." + b, dt, {rows, C}));
-      BTFC_ASSIGN_OR_RETURN(Tensor SxV, rd.read_checked("SxV." + b, dt, {texels, C}));
+      const DType want = cfg.quant.bits > 0 ? DType::zq : dt;
+      BTFC_ASSIGN_OR_RETURN(Tensor U, rd.read_checked("U." + b, want, {rows, C}));
+      BTFC_ASSIGN_OR_RETURN(Tensor SxV, rd.read_checked("SxV." + b, want, {texels, C}));
       BTFC_ASSIGN_OR_RETURN(Tensor scale, rd.read_checked("scale." + b, DType::f32, {C}));
       BTFC_ASSIGN_OR_RETURN(Tensor S, rd.read_checked("S." + b, DType::f32, {C}));
-      BTFC_ASSIGN_OR_RETURN(std::vector<float> u, U.to_f32());
-      BTFC_ASSIGN_OR_RETURN(std::vector<float> sxv, SxV.to_f32());
+      const std::string at = rd.path() + ": chunk TNSR '";
+      BTFC_ASSIGN_OR_RETURN(std::vector<float> u, want == DType::zq ? quant::decode(U, at + U.name + "'") : U.to_f32());
+      BTFC_ASSIGN_OR_RETURN(std::vector<float> sxv, want == DType::zq ? quant::decode(SxV, at + SxV.name + "'") : SxV.to_f32());
       BTFC_ASSIGN_OR_RETURN(std::vector<float> sc, scale.to_f32());
       BTFC_ASSIGN_OR_RETURN(std::vector<float> s, S.to_f32());
       Block blk;
@@ -550,6 +598,7 @@ class FmfCodec final : public Codec {
       }
       if (!blk.U.allFinite() || !blk.SxV.allFinite()) return corrupt_data(rd.path() + ": fmf block '" + b + "' holds non-finite values");
       blk.SxV = blk.SxV * blk.scale.asDiagonal();
+      if (want == DType::zq) blk.coded = {std::move(U), std::move(SxV)};
       blocks.push_back(std::move(blk));
     }
     auto model = std::make_unique<FmfModel>(d, p.canonical(), cfg, std::move(blocks));

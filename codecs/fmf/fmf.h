@@ -38,6 +38,12 @@
 //   scale.<b> [C]         f32          per-component scale of SxV (max |SxV_c|)
 //   S.<b>     [C]         f32          singular values (informational, like Bonn's files)
 // Rows are (light fastest, then view; rgb: colour fastest) exactly as core/btf.h and Bonn FMF/DFMF.
+//
+// precision=q (codecs/fmf/fmf_quant.h): U.<b> and SxV.<b> are zq tensors (core/quant.h:
+// per-component integers and steps, zstd-coded; textures=dct codes the SxV columns as 8 x 8 DCT
+// coefficients of the width x height eigen-texture images), scale.<b> is all ones. The steps
+// give every component the same squared error: SxV step D = 2^-bits x RMS of the strongest
+// eigen-texture, U column k step D / sigma_k. payload_bytes() is the tensors' real size.
 #pragma once
 #include <memory>
 #include <string>

@@ -1,0 +1,53 @@
+// fmf precision=q; see fmf_quant.h for the step rule.
+#include "codecs/fmf/fmf_quant.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/quant.h"
+
+namespace btfc::fmf {
+
+void quant_steps(const MatrixXfR& U, const MatrixXfR& SxV, int bits, std::vector<float>& u_steps, std::vector<float>& sxv_steps) {
+  const Eigen::Index C = SxV.cols();
+  const double texels = std::max<double>(1, double(SxV.rows()));
+  std::vector<double> sigma(static_cast<size_t>(C), 0.0);
+  double s1 = 0;
+  for (Eigen::Index k = 0; k < C; ++k) s1 = std::max(s1, sigma[size_t(k)] = SxV.col(k).cast<double>().norm());
+  double D = std::ldexp(s1 / std::sqrt(texels), -bits);
+  if (!(D > 0) || !std::isfinite(D)) D = 1;  // all-zero factors: any step codes them exactly
+  u_steps.resize(size_t(C)), sxv_steps.resize(size_t(C));
+  auto floor_step = [](double step, double max_abs) {  // integers stay within +-2^29
+    step = std::max(step, std::ldexp(max_abs, -29));
+    return float(std::clamp(step, 1e-30, 1e30));
+  };
+  for (Eigen::Index k = 0; k < C; ++k) {
+    const double sk = sigma[size_t(k)];
+    // A component with sigma_k = 0 contributes nothing: a step of 4 rounds its |U| <= 1 to 0.
+    const double dk = sk > 0 ? std::min(4.0, D / sk) : 4.0;
+    u_steps[size_t(k)] = floor_step(dk, U.rows() ? double(U.col(k).cwiseAbs().maxCoeff()) : 0.0);
+    sxv_steps[size_t(k)] = floor_step(D, SxV.rows() ? double(SxV.col(k).cwiseAbs().maxCoeff()) : 0.0);
+  }
+}
+
+QuantizedFactors quantize_factors(const std::string& name, const MatrixXfR& U, const MatrixXfR& SxV, const QuantConfig& cfg, int width,
+                                  int height) {
+  QuantizedFactors out;
+  std::vector<float> us, ss;
+  quant_steps(U, SxV, cfg.bits, us, ss);
+  const uint64_t C = uint64_t(U.cols());
+  std::vector<float> deq;
+  auto coded_u = quant::encode("U." + name, {uint64_t(U.rows()), C}, U.data(), us, {}, 19, &deq);
+  if (!coded_u.ok()) return out.status = coded_u.status(), out.U = U, out.SxV = SxV, out;
+  out.U = Eigen::Map<MatrixXfR>(deq.data(), U.rows(), U.cols());
+  quant::Layout L;
+  if (cfg.dct) L.dct = true, L.width = uint32_t(width), L.height = uint32_t(height);
+  auto coded_s = quant::encode("SxV." + name, {uint64_t(SxV.rows()), C}, SxV.data(), ss, L, 19, &deq);
+  if (!coded_s.ok()) return out.status = coded_s.status(), out.U = U, out.SxV = SxV, out;
+  out.SxV = Eigen::Map<MatrixXfR>(deq.data(), SxV.rows(), SxV.cols());
+  out.coded.push_back(std::move(coded_u).value());
+  out.coded.push_back(std::move(coded_s).value());
+  return out;
+}
+
+}  // namespace btfc::fmf

@@ -1,0 +1,46 @@
+// fmf precision=q: the factors as per-component quantized integers, zstd-coded (core/quant.h's
+// zq tensors), with the step sizes chosen so that every component adds the same squared error.
+//
+// Why these steps ("bits where they matter", reverse water-filling). With U orthonormal and
+// SxV = V Sigma, the BTF matrix is B ~ U SxV^T. Rounding column k of U with step d_k adds
+// about d_k^2 / 12 per entry, i.e. rows * d_k^2 / 12 * sigma_k^2 to ||B - B~||^2 (sigma_k =
+// ||SxV_k||); rounding column k of SxV with step e_k adds texels * e_k^2 / 12 (||U_k|| = 1).
+// Equal error per stored value, the rate-distortion optimum at high rate, is therefore
+//     e_k = D for every eigen-texture,   d_k = D / sigma_k for the eigen-ABRDFs,
+// and components whose entries are smaller than D round (mostly) to zero and cost almost no
+// bits: the "water level" D decides which components are worth bits. One knob sets D:
+//     D = 2^-bits * sigma_1 / sqrt(texels)   (the RMS of the strongest eigen-texture),
+// so `bits` is about the bit depth of the strongest eigen-texture, and every setting adapts to
+// the data's scale. A step is never below max|column| / 2^29 (integers stay in range).
+//
+// textures=dct: each SxV column (an image of width x height texels) is coded as its orthonormal
+// 8 x 8 DCT (the BSVTF tile transform, codecs/fmf/dct.h) with the same step D: the transform is
+// orthonormal, so the error per step is unchanged, and smooth eigen-textures put their energy
+// in few coefficients.
+#pragma once
+#include <string>
+#include <vector>
+
+#include "codecs/fmf/svd.h"
+#include "core/container.h"
+
+namespace btfc::fmf {
+
+struct QuantConfig {
+  int bits = 0;      // 0: not quantized (half / float)
+  bool dct = false;  // textures=dct
+};
+
+struct QuantizedFactors {
+  MatrixXfR U, SxV;            // the values the coded tensors decode to (bit for bit)
+  std::vector<Tensor> coded;   // zq tensors "U.<name>" [rows, C] and "SxV.<name>" [texels, C]
+  Status status;               // not ok: coding failed (U / SxV then hold the input)
+};
+
+// Steps of the rule above (first U's C steps, then SxV's C steps).
+void quant_steps(const MatrixXfR& U, const MatrixXfR& SxV, int bits, std::vector<float>& u_steps, std::vector<float>& sxv_steps);
+
+QuantizedFactors quantize_factors(const std::string& name, const MatrixXfR& U, const MatrixXfR& SxV, const QuantConfig& cfg, int width,
+                                  int height);
+
+}  // namespace btfc::fmf

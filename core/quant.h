@@ -1,0 +1,64 @@
+// Quantized, entropy-coded tensors: the container's `zq` tensor encoding (dtype code 8,
+// docs/FORMAT.md "zq: quantized tensors").
+//
+// A zq tensor of logical shape [rows, K] (one or more dims; the last is K, the others multiply to
+// rows) holds value[r][k] = step[k] * q[r][k] with integers q and one step per column ("per
+// component"), so a codec chooses the precision of each column. Optionally each column is an
+// image of width x height texels (rows = width * height, x fastest) coded as its orthonormal
+// 8 x 8 DCT (codecs/fmf/dct.h; the image padded to multiples of 8 by repeating its edge): then q
+// are DCT coefficients, step[k] their quantisation step, and the values are the inverse DCT
+// cropped to the image. The DCT is orthonormal, so a step means the same squared error per value
+// in both forms (step^2 / 12 for uniform rounding).
+//
+// The integers are zigzag-mapped (0, -1, 1, -2, ... -> 0, 1, 2, 3, ...), written as byte planes
+// (column by column: all low bytes, then the next byte, ...; DCT columns in zigzag-frequency
+// order, then block), and the planes are one zstd frame: zstd's entropy stage adapts to each
+// column's statistics and its matches take the runs of zeros of coarse columns.
+//
+// Contracts:
+//  - decode is total on hostile input: a truncated, corrupt or inconsistent encoding is a
+//    corrupt_data error naming `what` and the field; the decompressed size is implied by the
+//    shape, must equal the zstd frame's declared content size, and is refused (before any
+//    allocation) above 2^17 times the compressed size (more than zstd can produce) or 2^36 bytes.
+//  - quantize_column is round-to-nearest (ties away from zero); decode(encode(x)) reproduces the
+//    dequantized values bit for bit (the in-memory model of a codec equals its file).
+#pragma once
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "core/container.h"
+#include "core/status.h"
+
+namespace btfc::quant {
+
+struct Layout {
+  bool dct = false;  // columns are images coded as 8x8 DCT coefficients
+  uint32_t width = 0, height = 0;  // the image size when dct (rows = width * height)
+};
+
+// Quantizes a row-major [rows, K] float array with the K steps (each finite and > 0) and returns
+// the zq tensor. `dequantized` (optional, rows * K floats) receives the values decode gives back.
+// invalid_argument for bad steps, non-finite values, integers beyond +-2^30, or a dct layout
+// whose size disagrees with rows.
+Result<Tensor> encode(std::string name, std::vector<uint64_t> shape, const float* values, const std::vector<float>& steps,
+                      const Layout& layout, int zstd_level = 19, std::vector<float>* dequantized = nullptr);
+
+// The integers (column-major: q[k * coeff_rows + i]; DCT coefficients in coded order when dct)
+// and steps of a zq tensor, with its layout. `what` names the tensor in errors.
+struct Decoded {
+  std::vector<int32_t> q;
+  std::vector<float> steps;
+  Layout layout;
+  uint64_t rows = 0, cols = 0, coeff_rows = 0;  // coeff_rows: integers per column (padded image when dct)
+};
+Result<Decoded> decode_ints(const Tensor& t, const std::string& what);
+
+// The float values of a zq tensor, row-major [rows, K].
+Result<std::vector<float>> decode(const Tensor& t, const std::string& what);
+
+// Checks the fixed header of a zq payload against the tensor's shape without decompressing (the
+// container's writer and reader use it). data_bytes: the payload size.
+Status check_header(const uint8_t* data, uint64_t data_bytes, const std::vector<uint64_t>& shape, const std::string& what);
+
+}  // namespace btfc::quant

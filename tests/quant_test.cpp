@@ -1,0 +1,342 @@
+// Tests of the zq tensor encoding (core/quant.h) and fmf precision=q (codecs/fmf/fmf_quant.h):
+// exact integers, error bounded by the step, the DCT layout, hostile payloads and files, the
+// equal-error step rule, and fmf models that save and load to the same values.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <iterator>
+#include <random>
+
+#include "codecs/codec.h"
+#include "codecs/fmf/fmf_quant.h"
+#include "codecs/target.h"
+#include "core/container.h"
+#include "core/metrics.h"
+#include "core/quant.h"
+#include "core/synth.h"
+
+using namespace btfc;
+
+namespace {
+
+std::vector<float> random_values(size_t n, double sd, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> g(0, sd);
+  std::vector<float> v(n);
+  for (float& x : v) x = float(g(rng));
+  return v;
+}
+
+std::string tmp(const std::string& name) { return testing::TempDir() + "quant_test_" + name; }
+
+std::vector<char> slurp(const std::string& p) {
+  std::ifstream in(p, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), {}};
+}
+void spit(const std::string& p, const std::vector<char>& b) {
+  std::ofstream out(p, std::ios::binary);
+  out.write(b.data(), std::streamsize(b.size()));
+}
+
+}  // namespace
+
+TEST(Quant, IntegersExactAndErrorWithinHalfAStep) {
+  const size_t rows = 300, K = 5;
+  std::vector<float> v = random_values(rows * K, 1.0, 1);
+  const std::vector<float> steps = {0.5f, 0.01f, 1e-4f, 3.0f, 0.125f};
+  std::vector<float> deq;
+  auto t = quant::encode("x", {rows, K}, v.data(), steps, {}, 19, &deq);
+  ASSERT_TRUE(t.ok()) << t.status().message();
+  EXPECT_EQ(t->dtype, DType::zq);
+  auto d = quant::decode_ints(t.value(), "x");
+  ASSERT_TRUE(d.ok()) << d.status().message();
+  ASSERT_EQ(d->q.size(), rows * K);
+  auto back = quant::decode(t.value(), "x");
+  ASSERT_TRUE(back.ok());
+  for (size_t r = 0; r < rows; ++r)
+    for (size_t k = 0; k < K; ++k) {
+      // The integers are exactly round(v / step), the values step * q, within step / 2 of v.
+      EXPECT_EQ(d->q[k * rows + r], int32_t(std::round(double(v[r * K + k]) / double(steps[k]))));
+      EXPECT_EQ((*back)[r * K + k], deq[r * K + k]);
+      EXPECT_LE(std::fabs((*back)[r * K + k] - v[r * K + k]), 0.5 * steps[k] * (1 + 1e-5));
+    }
+  // Coarse columns cost fewer bytes: a 3.0 step on unit values is almost all zeros.
+  EXPECT_LT(t->bytes.size(), rows * K * 2);
+}
+
+TEST(Quant, MeanSquaredErrorIsStepSquaredOverTwelve) {
+  const size_t rows = 20000;
+  std::vector<float> v = random_values(rows, 1.0, 2);
+  const float step = 0.05f;
+  auto back = quant::decode(quant::encode("x", {rows, 1}, v.data(), {step}, {}).value(), "x");
+  ASSERT_TRUE(back.ok());
+  double e = 0;
+  for (size_t i = 0; i < rows; ++i) e += std::pow(double((*back)[i]) - v[i], 2);
+  e /= double(rows);
+  const double want = double(step) * step / 12;
+  EXPECT_GE(e, 0.9 * want);
+  EXPECT_LE(e, 1.1 * want);
+}
+
+TEST(Quant, DctLayoutRoundTripsWithTheSameErrorPerStep) {
+  // Two 20 x 12 images (not multiples of 8: edge padding), smooth plus noise.
+  const uint32_t W = 20, H = 12;
+  const size_t rows = W * H, K = 2;
+  std::vector<float> v(rows * K);
+  std::vector<float> noise = random_values(rows * K, 0.1, 3);
+  for (size_t i = 0; i < rows; ++i)
+    for (size_t k = 0; k < K; ++k) v[i * K + k] = float(std::sin(0.3 * (i % W) + k) * std::cos(0.2 * (i / W))) + noise[i * K + k];
+  quant::Layout L;
+  L.dct = true, L.width = W, L.height = H;
+  std::vector<float> deq;
+  const std::vector<float> steps = {0.02f, 0.02f};
+  auto t = quant::encode("t", {rows, K}, v.data(), steps, L, 19, &deq);
+  ASSERT_TRUE(t.ok()) << t.status().message();
+  auto back = quant::decode(t.value(), "t");
+  ASSERT_TRUE(back.ok()) << back.status().message();
+  double e = 0;
+  for (size_t i = 0; i < v.size(); ++i) {
+    EXPECT_EQ((*back)[i], deq[i]);  // decoder = encoder's reconstruction, bit for bit
+    e += std::pow(double((*back)[i]) - v[i], 2);
+  }
+  e /= double(v.size());
+  // Orthonormal DCT: the same step^2 / 12 per value (padding spreads a little error outside).
+  EXPECT_LE(e, 1.3 * 0.02 * 0.02 / 12);
+  EXPECT_GE(e, 0.5 * 0.02 * 0.02 / 12);
+  auto d = quant::decode_ints(t.value(), "t");
+  ASSERT_TRUE(d.ok());
+  EXPECT_EQ(d->coeff_rows, 24u * 16u);
+  // A layout that disagrees with the rows is refused.
+  L.width = 7;
+  EXPECT_FALSE(quant::encode("t", {rows, K}, v.data(), steps, L).ok());
+}
+
+TEST(Quant, HostilePayloadsAreErrorsNeverCrashes) {
+  const size_t rows = 64, K = 3;
+  std::vector<float> v = random_values(rows * K, 1.0, 4);
+  const Tensor good = quant::encode("h", {rows, K}, v.data(), {0.01f, 0.02f, 0.03f}, {}).value();
+  ASSERT_TRUE(quant::decode(good, "h").ok());
+  // Every truncation.
+  for (size_t n = 0; n < good.bytes.size(); ++n) {
+    Tensor t = good;
+    t.bytes.resize(n);
+    auto r = quant::decode(t, "h");
+    ASSERT_FALSE(r.ok()) << n;
+    EXPECT_EQ(r.status().code(), StatusCode::corrupt_data);
+  }
+  // Every single-byte flip: an error, or (a flip inside the zstd literals) different values;
+  // never a crash. Header flips are all errors except in the step values.
+  for (size_t i = 0; i < good.bytes.size(); ++i) {
+    Tensor t = good;
+    t.bytes[i] ^= 0x5a;
+    auto r = quant::decode(t, "h");
+    if (i < 32) EXPECT_FALSE(r.ok()) << "header byte " << i;
+  }
+  // Huge declared sizes: a shape of 2^40 rows, and a zstd frame claiming more than it holds.
+  Tensor big = good;
+  big.shape = {uint64_t(1) << 40, K};
+  auto r = quant::decode(big, "h");
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("too large"), std::string::npos) << r.status().message();
+  Tensor bomb = good;
+  bomb.shape = {uint64_t(1) << 27, K};  // 400 MB of integers from a few hundred bytes
+  r = quant::decode(bomb, "h");
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("more than zstd produces"), std::string::npos) << r.status().message();
+  Tensor wrong_rows = good;
+  wrong_rows.shape = {rows + 1, K};
+  EXPECT_FALSE(quant::decode(wrong_rows, "h").ok());
+  Tensor wrong_cols = good;
+  wrong_cols.shape = {rows, K + 1};
+  EXPECT_FALSE(quant::decode(wrong_cols, "h").ok());
+  // Bad steps at encode time.
+  EXPECT_FALSE(quant::encode("h", {rows, K}, v.data(), {0.01f, 0.0f, 0.03f}, {}).ok());
+  EXPECT_FALSE(quant::encode("h", {rows, K}, v.data(), {0.01f, NAN, 0.03f}, {}).ok());
+  v[5] = INFINITY;
+  EXPECT_FALSE(quant::encode("h", {rows, K}, v.data(), {0.01f, 0.02f, 0.03f}, {}).ok());
+}
+
+TEST(Quant, ContainerStoresZqTensorsAndRejectsDamagedFiles) {
+  const size_t rows = 50, K = 4;
+  std::vector<float> v = random_values(rows * K, 2.0, 5);
+  Tensor t = quant::encode("q", {rows, K}, v.data(), {0.1f, 0.1f, 0.2f, 0.4f}, {}).value();
+  const std::vector<float> want = quant::decode(t, "q").value();
+  BtfDesc d;
+  d.width = d.height = 2;
+  d.lights.dirs = d.views.dirs = {{0, 0, 1}};
+  ContainerWriter w;
+  w.set_desc(d);
+  w.set_codec({"test", 1, "test", ""});
+  w.add_tensor(t);
+  const std::string path = tmp("zq.btfc");
+  ASSERT_TRUE(w.write(path).ok());
+  EXPECT_EQ(w.file_size(), slurp(path).size());
+  {
+    auto rd = ContainerReader::open(path);
+    ASSERT_TRUE(rd.ok()) << rd.status().message();
+    EXPECT_EQ(rd->find("q")->dtype, DType::zq);
+    auto f = rd->read_floats("q", {rows, K});
+    ASSERT_TRUE(f.ok()) << f.status().message();
+    EXPECT_EQ(f.value(), want);
+    EXPECT_FALSE(rd->read_floats("q", {rows, K + 1}).ok());
+    EXPECT_TRUE(rd->verify_all().ok());
+  }
+  // The writer refuses a zq tensor whose header disagrees with its dims.
+  Tensor bad = t;
+  bad.shape = {rows, K + 3};
+  ContainerWriter w2;
+  w2.set_desc(d);
+  w2.set_codec({"test", 1, "test", ""});
+  w2.add_tensor(bad);
+  EXPECT_EQ(w2.write(tmp("bad.btfc")).code(), StatusCode::invalid_argument);
+  // Every truncation and a flip of every byte of the file: open or read fails cleanly.
+  const std::vector<char> file = slurp(path);
+  const std::string damaged = tmp("damaged.btfc");
+  for (size_t n = 0; n < file.size(); n += 7) {
+    spit(damaged, std::vector<char>(file.begin(), file.begin() + ptrdiff_t(n)));
+    auto rd = ContainerReader::open(damaged);
+    if (rd.ok()) EXPECT_FALSE(rd->read_floats("q", {rows, K}).ok()) << n;
+  }
+  for (size_t i = 0; i < file.size(); ++i) {
+    std::vector<char> f = file;
+    f[i] ^= 0x21;
+    spit(damaged, f);
+    auto rd = ContainerReader::open(damaged);
+    if (rd.ok()) EXPECT_FALSE(rd->read_floats("q", {rows, K}).ok()) << i;
+  }
+}
+
+TEST(FmfQuant, StepsGiveEveryComponentTheSameError) {
+  // U orthonormal-ish random columns, SxV columns of decaying strength.
+  const int rows = 400, texels = 256, C = 4;
+  fmf::MatrixXfR U(rows, C), SxV(texels, C);
+  std::vector<float> a = random_values(size_t(rows) * C, 1.0 / std::sqrt(double(rows)), 6);
+  std::vector<float> b = random_values(size_t(texels) * C, 1.0, 7);
+  for (int i = 0; i < rows * C; ++i) U.data()[i] = a[size_t(i)];
+  for (int t = 0; t < texels; ++t)
+    for (int k = 0; k < C; ++k) SxV(t, k) = b[size_t(t * C + k)] * std::pow(0.3f, float(k));
+  std::vector<float> us, ss;
+  fmf::quant_steps(U, SxV, 8, us, ss);
+  const double s1 = SxV.col(0).cast<double>().norm();
+  const double D = s1 / std::sqrt(double(texels)) / 256;
+  for (int k = 0; k < C; ++k) {
+    EXPECT_NEAR(ss[size_t(k)], D, 1e-6 * D);
+    // d_k * sigma_k = D: the U error of every component is the same.
+    EXPECT_NEAR(double(us[size_t(k)]) * SxV.col(k).cast<double>().norm(), D, 1e-5 * D);
+  }
+}
+
+namespace {
+
+Btf synth(int w, int h) {
+  SynthOptions o;
+  o.width = w, o.height = h;
+  o.lights = DirectionSet::ubo2003();
+  o.views = DirectionSet::ubo2003();
+  auto b = synthesize_btf(o);
+  EXPECT_TRUE(b.ok());
+  return std::move(b).value();
+}
+
+std::unique_ptr<Model> encode(const Btf& b, const std::string& spec) {
+  auto r = resolve_spec(spec);
+  EXPECT_TRUE(r.ok()) << r.status().message();
+  Context ctx;
+  auto m = r.value().first->encode(b, r.value().second, ctx);
+  EXPECT_TRUE(m.ok()) << m.status().message();
+  return std::move(m).value();
+}
+
+}  // namespace
+
+TEST(FmfQuant, ModelSavesLoadsAndDecodesToTheSameValues) {
+  const Btf b = synth(16, 16);
+  for (const char* spec : {"fmf:rank=8:precision=q:bits=7", "fmf:rank=6:precision=q:bits=9:textures=dct",
+                           "fmf:rank=4:chroma_rank=2:color=dfmf:precision=q:bits=8"}) {
+    auto m = encode(b, spec);
+    const std::string path = tmp("fmfq.btfc");
+    ASSERT_TRUE(save_model(*m, *find_codec("fmf"), path).ok());
+    auto rd = ContainerReader::open(path);
+    ASSERT_TRUE(rd.ok());
+    // payload_bytes counts the tensors' real bytes: the file is that plus the container's framing.
+    uint64_t tensor_bytes = 0;
+    for (const TensorInfo& t : rd->tensors()) tensor_bytes += t.size;
+    EXPECT_EQ(m->payload_bytes(), tensor_bytes) << spec;
+    auto loaded = load_model(rd.value());
+    ASSERT_TRUE(loaded.ok()) << loaded.status().message();
+    Btf x, y;
+    ASSERT_TRUE(m->decode_all(x).ok());
+    ASSERT_TRUE(loaded.value()->decode_all(y).ok());
+    double d = 0, mx = 0;
+    for (size_t i = 0; i < x.size(); ++i) d = std::max(d, double(std::fabs(x.data()[i] - y.data()[i]))), mx = std::max(mx, double(std::fabs(x.data()[i])));
+    EXPECT_LE(d, 1e-5 * mx) << spec;  // same factors; the OpenCL and CPU paths round alike to 1e-5
+    // Saved again, the loaded model writes the same tensors.
+    const std::string again = tmp("fmfq2.btfc");
+    ASSERT_TRUE(save_model(*loaded.value(), *find_codec("fmf"), again).ok());
+    auto rd2 = ContainerReader::open(again);
+    ASSERT_TRUE(rd2.ok());
+    for (const TensorInfo& t : rd->tensors()) EXPECT_EQ(rd2->find(t.name)->crc, t.crc) << spec << " " << t.name;
+  }
+}
+
+TEST(FmfQuant, MoreBitsMoreBytesLessError) {
+  const Btf b = synth(16, 16);
+  double last_err = INFINITY;
+  uint64_t last_bytes = 0;
+  for (int bits : {4, 6, 8, 10}) {
+    auto m = encode(b, "fmf:rank=8:precision=q:bits=" + std::to_string(bits));
+    Btf out;
+    ASSERT_TRUE(m->decode_all(out).ok());
+    const double e = compare_btf(b, out, false).value().rmse;
+    EXPECT_LT(e, last_err) << bits;
+    EXPECT_GT(m->payload_bytes(), last_bytes) << bits;
+    last_err = e, last_bytes = m->payload_bytes();
+  }
+  // At 10 bits the quantization error is far below the rank-8 truncation: q10 is as good as half.
+  auto h = encode(b, "fmf:rank=8:precision=half");
+  Btf out;
+  ASSERT_TRUE(h->decode_all(out).ok());
+  EXPECT_LE(last_err, 1.01 * compare_btf(b, out, false).value().rmse);
+  EXPECT_LT(last_bytes, h->payload_bytes());
+}
+
+TEST(FmfQuant, DamagedQuantizedModelFilesFailCleanly) {
+  const Btf b = synth(8, 8);
+  auto m = encode(b, "fmf:rank=3:precision=q:bits=6");
+  const std::string path = tmp("fmfq_dmg.btfc");
+  ASSERT_TRUE(save_model(*m, *find_codec("fmf"), path).ok());
+  const std::vector<char> file = slurp(path);
+  const std::string damaged = tmp("fmfq_dmg2.btfc");
+  for (size_t i = 0; i < file.size(); i += 13) {
+    std::vector<char> f = file;
+    f[i] ^= 0x10;
+    spit(damaged, f);
+    auto rd = ContainerReader::open(damaged);
+    if (!rd.ok()) continue;
+    auto loaded = load_model(rd.value());
+    if (loaded.ok()) {  // only a flip the format cannot see (the STAT text) may load
+      Btf out;
+      EXPECT_TRUE(loaded.value()->decode_all(out).ok());
+    }
+  }
+}
+
+TEST(FmfQuant, MaxBytesSearchesRankAndPrecisionWithinTheBudget) {
+  const Btf b = synth(8, 8);
+  Context ctx;
+  const double budget = 60000;
+  auto any = choose_for_target(b, "fmf", Target{Target::Kind::max_bytes, budget}, ctx);
+  ASSERT_TRUE(any.ok()) << any.status().message();
+  EXPECT_LE(double(any->model->payload_bytes()), budget);
+  EXPECT_NE(any->variants.find("precision=q"), std::string::npos) << any->variants;
+  // Only the rank, at half precision (the spec fixes it): never better than the full search.
+  auto half = choose_for_target(b, "fmf:precision=half", Target{Target::Kind::max_bytes, budget}, ctx);
+  ASSERT_TRUE(half.ok()) << half.status().message();
+  EXPECT_LE(double(half->model->payload_bytes()), budget);
+  EXPECT_NE(half->model->spec().find("precision=half"), std::string::npos);
+  Btf out;
+  ASSERT_TRUE(half->model->decode_all(out).ok());
+  EXPECT_GE(any->psnr, compare_btf(b, out, false).value().psnr);
+}
