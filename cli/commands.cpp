@@ -254,7 +254,20 @@ int cmd_info(const Global& g, const std::string& path, bool verify) {
   return 0;
 }
 
-int cmd_compress(const Global& g, const CompressArgs& a) {
+// A Bonn DFMF file can only express colour model 11's fixed luminance offset 1e-5; btfc's
+// default dfmf offset comes from the data. Writing a .btf, an unset offset means Bonn's.
+static CompressArgs bonn_compatible(const CompressArgs& in, const Global& g) {
+  CompressArgs a = in;
+  if (ends_with(a.out, ".btf") && a.spec.rfind("fmf", 0) == 0 && a.spec.find("color=dfmf") != std::string::npos &&
+      a.spec.find("offset=") == std::string::npos) {
+    a.spec += ":offset=1e-5";
+    if (!g.quiet) std::cerr << "note: " << a.out << " is a Bonn DFMF file: using its luminance offset (" << a.spec << ")\n";
+  }
+  return a;
+}
+
+int cmd_compress(const Global& g, const CompressArgs& given) {
+  const CompressArgs a = bonn_compatible(given, g);
   if (Status s = require_input(a.in); !s.ok()) return fail(g, s);
   if (Status c = claim_output(a.out, {a.in, a.work_file}, {"-o", {".btfc", ".btf"}}); !c.ok()) return fail(g, c);
   if (int code = 0; compress_streamed(g, a, code)) return code;

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Runs `btfc bench` over every codec (with a sweep of each one's quality knob) on the embedded
 # synthetic BTF and on the real measured slice in ../shared/data (when present), then draws the
-# plots (docs/plots/) and regenerates the bench table in docs/benchmarks.md from the CSV.
+# plots (docs/plots/) and regenerates the bench table in docs/benchmarks.md from the CSV, with the
+# table "which codec wins at equal bytes" per data set and metric (RMSE, PSNR, MSSIM).
 #   scripts/bench-all.sh [OUT_DIR]      (default build/bench-all; a few minutes on 2 cores)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -12,12 +13,17 @@ OUT=${1:-build/bench-all}
 mkdir -p "$OUT"
 CSV="$OUT/bench.csv"
 rm -f "$CSV"
-specs=(-c fmf:rank=2,4,8,16,32 -c lpyr:y=2,4,8 -c lpca:clusters=8:components=2,4,8 -c mlvq:scheme=2:ssim1=0.9,0.97,0.99)
+specs=(-c fmf:rank=2,4,8,16,32 -c fmf:precision=q:bits=6:rank=16,64,160 -c fmf:color=dfmf:rank=8,16,32 -c lpyr:y=2,4,8 -c lpca:clusters=8:components=2,4,8 -c mlvq:scheme=2:ssim1=0.9,0.97,0.99)
 "$BTFC" -q --force synth --width 64 --height 64 -o "$OUT/synthetic-64.btfc"
 "$BTFC" bench "$OUT/synthetic-64.btfc" --label synthetic-64 "${specs[@]}" --csv "$CSV" --append --renders "$OUT/renders" --pareto
 REAL=../shared/data/ubo2003_tv000_pv000_81lights
 if [ -d "$REAL" ]; then
   "$BTFC" bench "$REAL" --label ubo2003-slice "${specs[@]}" --csv "$CSV" --append --renders "$OUT/renders" --pareto
+fi
+# The full 81 x 81 direction HDR textile: noise, highlights, shadows, masking.
+TEXTILE=../shared/data/textile_lurex_utia64
+if [ -d "$TEXTILE" ]; then
+  "$BTFC" bench "$TEXTILE" --label textile-hdr "${specs[@]}" --csv "$CSV" --append --renders "$OUT/renders" --pareto
 fi
 # Debian's interpreter: python3-matplotlib is installed for it, not for a pyenv python3 on PATH.
 /usr/bin/python3 scripts/plot_bench.py docs/plots "$CSV" --doc docs/benchmarks.md

@@ -111,6 +111,44 @@ def table(rows, out_dir, doc_dir):
         lines.append(f"![rate-distortion {data}]({rel}/rd_psnr-{safe(data)}.png) "
                      f"![SSIM {data}]({rel}/rd_mean_ssim-{safe(data)}.png) ![Pareto {data}]({rel}/pareto-{safe(data)}.png)")
     lines.append(f"![throughput]({rel}/throughput.png)")
+    lines += ["", "### Which codec wins at equal bytes", winners(rows)]
+    return "\n".join(lines)
+
+
+# Budgets of the "which codec wins at equal bytes" table, as compression ratios (raw bytes /
+# payload bytes, the CSV's ratio column).
+BUDGET_RATIOS = (25, 50, 100, 200, 500)
+METRICS = (("rmse", "RMSE", min, "{:.4g}"), ("psnr", "PSNR dB", max, "{:.2f}"), ("mean_ssim", "MSSIM", max, "{:.4f}"))
+
+
+def winners(rows):
+    """Per data set, metric and byte budget: each codec's best run whose payload fits the budget
+    (ratio >= the budget's ratio), and the codec that wins. A codec with no run that small is '-'."""
+    lines = []
+    for data in sorted({r["data"] for r in rows}):
+        sel = [r for r in rows if r["data"] == data]
+        codecs = sorted({r["codec"] for r in sel})
+        for key, label, better, fmt in METRICS:
+            lines += ["", f"**{data}, {label}** (best run of each codec whose payload fits the budget; winner in bold)", "",
+                      "| budget | " + " | ".join(f"`{c}`" for c in codecs) + " | winner |",
+                      "|---|" + "---|" * (len(codecs) + 1)]
+            for budget in BUDGET_RATIOS:
+                best = {}
+                for c in codecs:
+                    fit = [r for r in sel if r["codec"] == c and r["ratio"] >= budget and math.isfinite(r[key])]
+                    if fit:
+                        best[c] = better(fit, key=lambda r: r[key])
+                if not best:
+                    continue
+                win = better(best, key=lambda c: best[c][key])
+                cells = []
+                for c in codecs:
+                    if c not in best:
+                        cells.append("-")
+                        continue
+                    v = fmt.format(best[c][key]) + f" ({best[c]['ratio']:.0f}:1)"
+                    cells.append(f"**{v}**" if c == win else v)
+                lines.append(f"| 1:{budget} | " + " | ".join(cells) + f" | `{best[win]['spec_given']}` |")
     return "\n".join(lines)
 
 

@@ -514,7 +514,7 @@ TEST(Lpca, DecodeSubsetsAndEvalDirAgreeWithFullDecode) {
 }
 
 TEST(Lpca, BadParamsAreRejected) {
-  for (const char* spec : {"lpca:clusters=0", "lpca:components=0", "lpca:sh_order=17", "lpca:precision=double", "lpca:iters=0",
+  for (const char* spec : {"lpca:clusters=-1", "lpca:components=0", "lpca:sh_order=17", "lpca:precision=double", "lpca:iters=0",
                            "lpca:rank=3"}) {
     auto s = parse_spec_string(spec);
     ASSERT_TRUE(s.ok());

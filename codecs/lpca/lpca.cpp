@@ -2,6 +2,8 @@
 #include "codecs/lpca/lpca.h"
 
 #include <Imath/half.h>
+
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 
@@ -20,12 +22,32 @@ namespace {
 constexpr uint32_t k_payload_version = 1;
 
 const ParamSpec k_params[] = {
-    {"clusters", ParamSpec::Type::integer, "32", 1, 4096, {}, "clusters K of the local PCA (empty ones are dropped)"},
+    {"clusters", ParamSpec::Type::integer, "0", 0, 4096, {},
+     "clusters K of the local PCA (empty ones are dropped); 0 = from the data: texels / (64 (components + 1)), 1..32"},
     {"components", ParamSpec::Type::integer, "8", 1, 256, {}, "eigen-BRDFs c_B per cluster (besides the mean)", true},
     {"iters", ParamSpec::Type::integer, "10", 1, 1000, {}, "maximum {PCA, reassignment} iterations"},
     {"precision", ParamSpec::Type::choice, "half", 0, 0, {"half", "float"}, "storage of the eigen-BRDF table and the weights"},
     {"sh_order", ParamSpec::Type::integer, "5", 1, sh::k_max_order, {}, "spherical-harmonic order n (n^2 coefficients) for relighting / PRT"},
 };
+
+// clusters=0: as many clusters as the data pays for. A cluster's mean and c eigen-BRDFs are
+// estimated from its member texels, and stored at one ABRDF each: asking for at least
+// 64 (c + 1) texels per cluster keeps every basis vector backed by 64 texels (a PCA fitted from
+// fewer members fits their noise), and the bases at most 1/64 of the data's values, so they can
+// never dominate the payload (at 48 x 48 texels and the paper's 32 x 8 the bases were 95 % of the
+// bytes, 16:1). At 256 x 256 texels and c = 8 this gives the paper's 32 clusters.
+int clusters_for(size_t texels, int components) {
+  const size_t k = texels / (size_t(64) * size_t(components + 1));
+  return int(std::clamp<size_t>(k, 1, 32));
+}
+
+// The spec a model records: clusters=0 replaced by the count used.
+std::string resolved_spec(const std::string& canonical, int clusters) {
+  const std::string key = ":clusters=0:";
+  const size_t at = canonical.find(key);
+  if (at == std::string::npos) return canonical;
+  return canonical.substr(0, at) + ":clusters=" + std::to_string(clusters) + ":" + canonical.substr(at + key.size());
+}
 
 Config config_from(const Params& p) {
   return {int(p.get_int("components")), p.get("precision") == "half", int(p.get_int("sh_order"))};
@@ -200,6 +222,7 @@ class LpcaCodec final : public Codec {
     const Config cfg = config_from(p);
     FitOptions fo;
     fo.clusters = int(p.get_int("clusters"));
+    if (fo.clusters == 0) fo.clusters = clusters_for(d.num_texels(), cfg.components);
     fo.components = cfg.components;
     fo.iters = int(p.get_int("iters"));
     fo.seed = ctx.seed;
@@ -272,7 +295,7 @@ class LpcaCodec final : public Codec {
     if (fit.assign_exhaustive > 0) st.add("assign_scored_fraction", double(fit.assign_scored) / double(fit.assign_exhaustive));
     if (K < fo.clusters)
       st.note("clusters", std::to_string(fo.clusters - K) + " of " + std::to_string(fo.clusters) + " clusters stayed empty (fewer texels than clusters)");
-    auto model = std::make_unique<LpcaModel>(d, p.canonical(), cfg, std::move(fit.cluster_of), std::move(fit.table), std::move(fit.weights),
+    auto model = std::make_unique<LpcaModel>(d, resolved_spec(p.canonical(), fo.clusters), cfg, std::move(fit.cluster_of), std::move(fit.table), std::move(fit.weights),
                                              std::move(mean_scale), std::move(weight_scale));
     st.add("encode_seconds", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     model->mutable_stats() = std::move(st);
@@ -293,7 +316,7 @@ class LpcaCodec final : public Codec {
     const TensorInfo* ti = rd.find("table");
     if (!ti || ti->shape.size() != 3) return corrupt_data(path + ": lpca tensor 'table' missing or not 3-D");
     const uint64_t K = ti->shape[0];
-    if (K == 0 || K > uint64_t(p.get_int("clusters")))
+    if (K == 0 || K > uint64_t(p.get_int("clusters") > 0 ? p.get_int("clusters") : 4096))
       return corrupt_data(path + ": lpca tensor 'table' has " + std::to_string(K) + " clusters (spec allows 1.." + std::to_string(p.get_int("clusters")) + ")");
     const DType dt = cfg.half ? DType::f16 : DType::f32;
     const uint64_t rows = d.abrdf_size(), H = uint64_t(d.height), W = uint64_t(d.width);
