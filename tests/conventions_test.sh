@@ -9,19 +9,7 @@ W=$1
 BTFC=$(realpath "$BTFC")
 rm -rf "$W" && mkdir -p "$W"
 fails=0
-check() { # check NAME EXPECTED_EXIT CMD...
-  local name=$1 want=$2; shift 2
-  "$@" >"$W/out.txt" 2>"$W/err.txt"
-  local got=$?
-  if [ "$got" -ne "$want" ]; then
-    echo "FAIL $name: exit $got, wanted $want"; cat "$W/out.txt" "$W/err.txt"; fails=$((fails + 1))
-  else
-    echo "ok   $name"
-  fi
-}
-expect_grep() { # expect_grep NAME PATTERN FILE
-  if ! grep -q -- "$2" "$3"; then echo "FAIL $1: '$2' not in $3:"; cat "$3"; fails=$((fails + 1)); else echo "ok   $1"; fi
-}
+source "$(dirname "$0")/cli_lib.sh"  # check, expect_grep
 
 check synth 0 "$BTFC" synth --width 8 --height 8 -o "$W/s.btfc" -q
 check compress-q-after 0 "$BTFC" compress "$W/s.btfc" -c fmf:rank=4 -o "$W/m.btfc" -q

@@ -7,19 +7,7 @@ set -uo pipefail
 W=$1
 rm -rf "$W" && mkdir -p "$W"
 fails=0
-check() { # check NAME EXPECTED_EXIT CMD...
-  local name=$1 want=$2; shift 2
-  "$@" >"$W/out.txt" 2>"$W/err.txt"
-  local got=$?
-  if [ "$got" -ne "$want" ]; then
-    echo "FAIL $name: exit $got, wanted $want"; cat "$W/out.txt" "$W/err.txt"; fails=$((fails + 1))
-  else
-    echo "ok   $name"
-  fi
-}
-expect_grep() { # expect_grep NAME PATTERN FILE
-  if ! grep -q -- "$2" "$3"; then echo "FAIL $1: '$2' not in $3:"; cat "$3"; fails=$((fails + 1)); else echo "ok   $1"; fi
-}
+source "$(dirname "$0")/cli_lib.sh"  # check, expect_grep
 
 # 56 x 56 texels x 81 x 81 x RGB = 61.7 M values = 247 MB as float32; limit 40 MiB.
 SPEC=fmf:rank=16:oversample=8:power_iters=2

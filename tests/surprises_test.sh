@@ -7,19 +7,7 @@ set -uo pipefail
 W=$1
 rm -rf "$W" && mkdir -p "$W"
 fails=0
-check() { # check NAME EXPECTED_EXIT CMD...
-  local name=$1 want=$2; shift 2
-  "$@" >"$W/out.txt" 2>"$W/err.txt"
-  local got=$?
-  if [ "$got" -ne "$want" ]; then
-    echo "FAIL $name: exit $got, wanted $want"; cat "$W/out.txt" "$W/err.txt"; fails=$((fails + 1))
-  else
-    echo "ok   $name"
-  fi
-}
-expect_grep() { # expect_grep NAME PATTERN FILE
-  if ! grep -q -- "$2" "$3"; then echo "FAIL $1: '$2' not in $3:"; cat "$3"; fails=$((fails + 1)); else echo "ok   $1"; fi
-}
+source "$(dirname "$0")/cli_lib.sh"  # check, expect_grep
 
 check synth-set 0 "$BTFC" synth --width 6 --height 5 --views 0,0 --format png -o "$W/set"
 check full-set 0 "$BTFC" info "$W/set"
