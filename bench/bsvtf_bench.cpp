@@ -6,7 +6,7 @@
 // build and full-decode time, and -- to judge "visible" -- the BTF decoded from the BSVTF against
 // the fmf model itself on a subset of (light, view) images (PSNR, mean SSIM) and a rendered flat
 // sample (SSIM). With --original (raw .btfc or image set), both are also compared with the
-// uncompressed BTF. Then the tile cache (codecs/fmf/tile_cache.h) on the --cache-quality file: error / SSIM against cache size on
+// uncompressed BTF. Then the tile cache (formats/bsvtf/tile_cache.h) on the --cache-quality file: error / SSIM against cache size on
 // the fly-through path (Fig. 4), and SSIM against bytes streamed on the still path with a
 // bandwidth limit (Fig. 5).
 //
@@ -23,9 +23,9 @@
 #include <string>
 
 #include "codecs/codec.h"
-#include "codecs/fmf/bsvtf.h"
+#include "formats/bsvtf/bsvtf.h"
 #include "codecs/fmf/fmf.h"
-#include "codecs/fmf/tile_cache.h"
+#include "formats/bsvtf/tile_cache.h"
 #include "codecs/render.h"
 #include "core/blas_env.h"
 #include "core/metrics.h"

@@ -19,7 +19,7 @@
 #include <string>
 
 #include "codecs/codec.h"
-#include "codecs/fmf/svd.h"
+#include "core/svd.h"
 #include "core/cl_runtime.h"
 #include "core/blas_env.h"
 #include "core/synth.h"
@@ -94,10 +94,10 @@ int main(int argc, char** argv) {
     return 0;
   }
   auto run = [&](int q, int p, const char* label) {
-    fmf::SvdOptions opt;
-    opt.max_rank = rank, opt.power_iters = q, opt.oversample = p, opt.method = fmf::SvdMethod::randomized;
+    SvdOptions opt;
+    opt.max_rank = rank, opt.power_iters = q, opt.oversample = p, opt.method = SvdMethod::randomized;
     double t = now_s();
-    auto r = fmf::truncated_svd(btf->data(), d.abrdf_size(), d.num_texels(), opt);
+    auto r = truncated_svd(btf->data(), d.abrdf_size(), d.num_texels(), opt);
     const double secs = now_s() - t;
     if (!r.ok()) {
       std::fprintf(stderr, "%s\n", r.status().message().c_str());

@@ -12,7 +12,7 @@
 
 #include "cli/commands.h"
 #include "cli/outputs.h"
-#include "codecs/lpca/lpca.h"  // read_rgb_exr / write_rgb_exr
+#include "formats/exr/envmap.h"
 #include "codecs/measure.h"
 #include "core/sysinfo.h"
 #include "formats/btf_io.h"

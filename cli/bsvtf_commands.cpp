@@ -1,6 +1,6 @@
 // `btfc bsvtf` (write the BSVTF streaming file of an fmf model) and `btfc tilecache` (run the
-// offline tile-cache simulator on one). The algorithms live in codecs/fmf/bsvtf.h and
-// codecs/fmf/tile_cache.h; this file parses, calls and prints.
+// offline tile-cache simulator on one). The algorithms live in formats/bsvtf/bsvtf.h and
+// formats/bsvtf/tile_cache.h; this file parses, calls and prints.
 #include <CLI/CLI.hpp>
 #include <unistd.h>
 
@@ -14,8 +14,8 @@
 
 #include "cli/commands.h"
 #include "cli/outputs.h"
-#include "codecs/fmf/bsvtf.h"
-#include "codecs/fmf/tile_cache.h"
+#include "formats/bsvtf/bsvtf.h"
+#include "formats/bsvtf/tile_cache.h"
 #include "formats/btf_io.h"
 
 namespace btfc::cli {

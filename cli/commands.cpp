@@ -12,6 +12,7 @@
 
 #include "codecs/codec.h"
 #include "codecs/lpca/lpca.h"
+#include "formats/exr/envmap.h"
 #include "codecs/target.h"
 #include "core/cl_runtime.h"
 #include "core/container.h"
@@ -19,6 +20,7 @@
 #include "core/synth.h"
 #include "formats/bonn/bonn_btf.h"
 #include "formats/btf_io.h"
+#include "formats/reader.h"
 #include "formats/preview.h"
 
 namespace btfc::cli {
@@ -197,17 +199,18 @@ static int info_bonn(const Global& g, const std::string& path) {
 }
 
 int cmd_info(const Global& g, const std::string& path, bool verify) {
-  std::error_code ec;
   if (Status s = require_input(path); !s.ok()) return fail(g, s);
-  if (std::filesystem::is_directory(path, ec)) {
-    auto btf = read_btf(path);
-    if (!btf.ok()) return fail(g, btf.status());
-    const BtfDesc& d = btf->desc();
+  const BtfReader* reader = find_reader(path);
+  const std::string kind = reader ? reader->name : "btfc";
+  if (kind == "image-set") {
+    auto in = open_input(path);  // planned, not read
+    if (!in.ok()) return fail(g, in.status());
+    const BtfDesc& d = in.value()->desc();
     if (g.json) std::cout << json{{"path", path}, {"kind", "image set"}, {"desc", d.summary()}, {"hdr", d.hdr}}.dump(2) << "\n";
     else std::cout << path << ": image set, " << d.summary() << (d.hdr ? ", HDR" : ", LDR (sRGB-decoded)") << "\n";
     return 0;
   }
-  if (is_bonn_btf(path)) return info_bonn(g, path);
+  if (kind == "bonn") return info_bonn(g, path);
   auto rd = ContainerReader::open(path);
   if (!rd.ok()) return fail(g, rd.status());
   if (verify) {
@@ -254,28 +257,29 @@ int cmd_info(const Global& g, const std::string& path, bool verify) {
   return 0;
 }
 
-// A Bonn DFMF file can only express colour model 11's fixed luminance offset 1e-5; btfc's
-// default dfmf offset comes from the data. Writing a .btf, an unset offset means Bonn's.
-static CompressArgs bonn_compatible(const CompressArgs& in, const Global& g) {
+// The spec as the output's writer needs it (formats/btf_io.h spec_for_output: a Bonn DFMF file
+// holds only colour model 11's fixed luminance offset).
+static CompressArgs for_output(const CompressArgs& in, const Global& g) {
   CompressArgs a = in;
-  if (ends_with(a.out, ".btf") && a.spec.rfind("fmf", 0) == 0 && a.spec.find("color=dfmf") != std::string::npos &&
-      a.spec.find("offset=") == std::string::npos) {
-    a.spec += ":offset=1e-5";
-    if (!g.quiet) std::cerr << "note: " << a.out << " is a Bonn DFMF file: using its luminance offset (" << a.spec << ")\n";
-  }
+  std::string note;
+  a.spec = spec_for_output(a.spec, a.out, &note);
+  if (!note.empty() && !g.quiet) std::cerr << "note: " << a.out << ": " << note << "\n";
   return a;
 }
 
 int cmd_compress(const Global& g, const CompressArgs& given) {
-  const CompressArgs a = bonn_compatible(given, g);
+  const CompressArgs a = for_output(given, g);
   if (Status s = require_input(a.in); !s.ok()) return fail(g, s);
   if (Status c = claim_output(a.out, {a.in, a.work_file}, {"-o", {".btfc", ".btf"}}); !c.ok()) return fail(g, c);
-  if (int code = 0; compress_streamed(g, a, code)) return code;
+  // Probed and opened once (formats/reader.h): its shape decides in core or out of core.
+  auto t0 = Clock::now();
+  auto input = open_input(a.in);
+  if (!input.ok()) return fail(g, input.status());
+  if (int code = 0; compress_streamed(g, a, input.value()->desc(), code)) return code;
   auto resolved = resolve_spec(a.spec);
   if (!resolved.ok()) return fail(g, resolved.status());
   auto [codec, params] = std::move(resolved).value();
-  auto t0 = Clock::now();
-  auto btf = read_btf(a.in);
+  auto btf = input.value()->read();
   if (!btf.ok()) return fail(g, btf.status());
   const double read_s = seconds_since(t0);
   Progress progress(g.quiet || g.json);
@@ -306,8 +310,7 @@ int cmd_compress(const Global& g, const CompressArgs& given) {
   }
   if (!model.ok()) return fail(g, model.status().with_context(a.in));
   const double enc_s = seconds_since(t0);
-  Status s = ends_with(a.out, ".btf") ? write_bonn(*model.value(), a.out, params.get("precision") == "half")
-                                      : save_model(*model.value(), *codec, a.out);
+  Status s = write_model(*model.value(), a.out);
   if (!s.ok()) return fail(g, s);
   const double ratio = double(btf->desc().num_values()) * 4.0 / double(std::filesystem::file_size(a.out));
   if (g.json) {
@@ -439,7 +442,7 @@ int cmd_relight(const Global& g, const RelightArgs& a) {
   auto view = parse_theta_phi(a.view, "--view");
   if (!view.ok()) return fail(g, view.status());
   auto t0 = Clock::now();
-  auto env = project_environment(a.env, a.order);
+  auto env = read_environment(a.env, a.order);
   if (!env.ok()) return fail(g, env.status());
   const double project_s = seconds_since(t0);
   t0 = Clock::now();

@@ -118,7 +118,7 @@ int cmd_render(const Global& g, const RenderArgs& a);
 
 // Bounded memory (cli/stream_commands.cpp): each returns true when it handled the command
 // (the BTF does not fit in --max-memory, or the output is a streamed Bonn BDI), with `code` set.
-bool compress_streamed(const Global& g, const CompressArgs& a, int& code);
+bool compress_streamed(const Global& g, const CompressArgs& a, const BtfDesc& desc, int& code);
 bool decompress_streamed(const Global& g, const DecompressArgs& a, int& code);
 bool bench_streamed(const Global& g, const BenchArgs& a, int& code);
 

@@ -1,5 +1,5 @@
 // `btfc export MODEL --to DIR`: GPU-ready textures, manifest and reference shader
-// (formats/gpu/export.h), optionally cut to a scene's needs (--scene, formats/gpu/scene.h).
+// (formats/gpu/export.h), optionally cut to a scene's needs (--scene, core/scene.h).
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <iostream>
@@ -7,9 +7,8 @@
 
 #include "cli/commands.h"
 #include "cli/outputs.h"
-#include "codecs/fmf/bsvtf.h"
-#include "codecs/fmf/fmf_export.h"
-#include "codecs/lpca/lpca.h"
+#include "formats/bsvtf/bsvtf_export.h"
+#include "formats/exr/envmap.h"
 #include "formats/btf_io.h"
 #include "formats/gpu/export.h"
 
@@ -30,10 +29,9 @@ int cmd_export(const Global& g, const ExportArgs& a) {
   if (!model.ok()) return fail(g, model.status());
   Model& m = *model.value();
   if (!a.env.empty()) {
-    if (m.spec().rfind("lpca", 0) != 0) return fail(g, invalid_argument("--env: only lpca models take an environment (PRT maps)"));
-    auto env = project_environment(a.env, a.sh_order);
+    auto env = read_environment(a.env, a.sh_order);
     if (!env.ok()) return fail(g, env.status());
-    if (Status s = attach_environment(m, env.value()); !s.ok()) return fail(g, s.with_context(a.in));
+    if (Status s = m.attach_environment(env.value()); !s.ok()) return fail(g, s.with_context("--env"));
   }
   gpu::ExportOptions opt;
   opt.half = !a.float32;
@@ -47,25 +45,10 @@ int cmd_export(const Global& g, const ExportArgs& a) {
   auto bundle = gpu::build_export(m, opt);
   if (!bundle.ok()) return fail(g, bundle.status().with_context(a.in));
   BsvtfReport bsvtf;
-  if (bundle->codec == "fmf" && !a.no_bsvtf) {
-    // The BSVTF streaming file (seed 000 sections 3-7) next to the textures: the same model,
-    // tiled for level-of-detail streaming.
-    bundle->write_extra = [&](const std::string& dir) -> Result<nlohmann::json> {
-      BsvtfOptions bo;
-      bo.quality = a.bsvtf_quality;
-      std::unique_ptr<Model> cut;  // a scene keeps only its levels, components and directions
-      if (opt.scene) {
-        BTFC_ASSIGN_OR_RETURN(cut, gpu::fmf_scene_model(m, opt));
-      }
-      BTFC_RETURN_IF_ERROR(write_bsvtf(cut ? *cut : m, bo, dir + "/model.bsvtf", &bsvtf));
-      return nlohmann::json::array({{{"file", "model.bsvtf"},
-                                     {"meaning", "BSVTF streaming file (docs/FORMAT.md): eigen-textures as 64 x 64 DCT tiles with 4 px borders, "
-                                                 "mip levels as residuals to the parent, eigen-ABRDF packets"},
-                                     {"quality", bo.quality},
-                                     {"bytes", bsvtf.file_bytes},
-                                     {"tiles", bsvtf.tiles},
-                                     {"eigen_texture_psnr_db", bsvtf.psnr}}});
-    };
+  if (!a.no_bsvtf) {
+    BsvtfOptions bo;
+    bo.quality = a.bsvtf_quality;
+    attach_bsvtf(bundle.value(), m, opt, bo, &bsvtf);
   }
   if (Status s = gpu::write_export_dir(bundle.value(), a.dir, !a.no_previews); !s.ok()) return fail(g, s);
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

@@ -1,5 +1,5 @@
 // Bounded-memory (out-of-core) variants of compress / decompress / bench. The algorithms live
-// in codecs/fmf/ooc_*.h and formats/btf_stream.h; this file decides when to use them and prints.
+// in formats/out_of_core.h and formats/btf_stream.h; this file decides when to use them and prints.
 #include <unistd.h>
 
 #include <chrono>
@@ -11,13 +11,13 @@
 #include "cli/commands.h"
 #include "cli/outputs.h"
 #include "codecs/codec.h"
-#include "codecs/fmf/ooc_fmf.h"
 #include "core/limits.h"
 #include "core/memory.h"
 #include "formats/bonn/bdi_work.h"
 #include "formats/btf_io.h"
 #include "formats/btf_stream.h"
 #include "formats/image_set.h"
+#include "formats/out_of_core.h"
 
 namespace btfc::cli {
 namespace {
@@ -37,94 +37,35 @@ Result<size_t> limit_of(const std::string& text) {
   return bytes;
 }
 
-// Removes a temporary working file on every exit path.
-struct TempFile {
-  std::string path;
-  ~TempFile() {
-    if (!path.empty()) std::filesystem::remove(path);
-  }
-};
-
-// The streamed fmf encode of `in` within `limit`; fills `report` with what it did.
-Result<std::unique_ptr<Model>> encode_streamed(const Global& g, const std::string& in, const BtfDesc& desc, const std::string& spec,
-                                               const std::string& work_file, const std::string& temp_dir, size_t limit,
-                                               unsigned long long seed, json& report, TempFile& temp) {
-  BTFC_ASSIGN_OR_RETURN(auto resolved, resolve_spec(spec));
-  auto [codec, params] = std::move(resolved);
-  const std::string need = format_bytes(desc.num_values() * 4);
-  if (std::string(codec->name()) != "fmf")
-    return invalid_argument(in + ": the BTF (" + need + " as float32) does not fit in --max-memory " + format_bytes(limit) +
-                            "; only fmf compresses out of core (" + codec->name() + " needs it in memory)");
-  BTFC_ASSIGN_OR_RETURN(StreamPlan plan, plan_streamed_fmf(params, desc, limit));
-  const uint32_t lines = stream_lines_per_chunk(desc, plan, limit);
-  if (lines == 0)
-    return invalid_argument("--max-memory " + format_bytes(limit) + " is too small for " + desc.summary() + ": streaming needs at least " +
-                            format_bytes(plan.fixed_bytes + k_stream_bytes_per_value * desc.abrdf_size() * uint64_t(desc.width)));
+// The streamed encode of `in` within `limit` (formats/out_of_core.h); fills `report` with what
+// it did. `out` keeps an automatic working file alive until the caller is done with it.
+Result<std::unique_ptr<Model>> encode_streamed(const Global& g, const std::string& in, const std::string& spec, const std::string& work_file,
+                                               const std::string& temp_dir, size_t limit, unsigned long long seed, json& report,
+                                               OutOfCoreResult& out) {
   Progress progress(g.quiet || g.json);
-  Context ctx;
-  ctx.seed = seed;
-  ctx.progress = &progress;
-  ctx.max_bytes = limit;
-  fmf::Collective single;
-  // Runs the streamed SVD over `src` and fills the report (`wf`: where the chunks came from).
-  auto run = [&](const fmf::ChunkSource& src, const WorkFile& wf) -> Result<std::unique_ptr<Model>> {
-    const auto t0 = Clock::now();
-    BTFC_ASSIGN_OR_RETURN(StreamedEncode enc, encode_fmf_streamed(src, desc, params, ctx, single));
-    report = json{{"max_memory", limit},
-                  {"work_file", wf.path},
-                  {"work_file_built", wf.built},
-                  {"work_file_reused", wf.reused},
-                  {"work_file_seconds", wf.seconds},
-                  {"work_file_bytes", wf.bytes_written},
-                  {"work_file_scale", wf.scale},
-                  {"work_file_note", wf.note},
-                  {"chunks", src.num_chunks()},
-                  {"chunk_texels", src.chunk_count(0)},
-                  {"passes", enc.stats.passes},
-                  {"bytes_read", enc.stats.bytes_read},
-                  {"pass_seconds", enc.stats.pass_seconds},
-                  {"factorize_seconds", since(t0)},
-                  {"buffer_bytes", enc.stats.buffer_bytes}};
-    return std::move(enc.model);
-  };
-  // In place only while the page cache can hold the raw file across the passes: beyond the
-  // available RAM every pass reads the disk, and the half working file halves those bytes.
-  std::error_code fec;
-  const uint64_t raw_bytes = is_raw_btfc_file(in) ? std::filesystem::file_size(in, fec) : 0;
-  const uint64_t avail = mem_available_bytes();
-  std::string why_work;
-  if (work_file.empty() && raw_bytes > 0 && avail > 0 && raw_bytes > avail)
-    why_work = in + " (" + format_bytes(raw_bytes) + ") is larger than the available RAM (" + format_bytes(avail) +
-               "): a half-float working file halves the disk reads of every pass";
-  if (work_file.empty() && raw_bytes > 0 && why_work.empty()) {
-    // A raw .btfc is texel-major already: stream its data tensor in place, no working file.
-    // Its chunks are mapped (two at a time: 8 bytes per value); sized for 12, what the pread
-    // fallback (one float copy + two float blocks) needs, so either path fits the limit.
-    const uint32_t raw_lines = stream_lines_per_chunk(desc, plan, limit / 12 * 10);
-    if (raw_lines > 0) {
-      BTFC_ASSIGN_OR_RETURN(std::unique_ptr<fmf::ChunkSource> src, open_raw_chunks(in, raw_lines));
-      WorkFile none;
-      none.path = in;
-      none.note = "raw .btfc streamed in place (texel-major already): no working file";
-      return run(*src, none);
-    }
-  }
-  std::string work = work_file;
-  if (work.empty()) {
-    work = temp_dir + "/.btfc-work-" + std::to_string(::getpid()) + ".btf";
-    temp.path = work;
-  }
-  BTFC_ASSIGN_OR_RETURN(WorkFile wf, prepare_work_file(in, work, lines, limit, &progress));
-  if (!why_work.empty()) wf.note = why_work + (wf.note.empty() ? "" : "; " + wf.note);
-  if (!wf.note.empty() && !g.quiet && !g.json) std::cerr << "note: " << wf.note << "\n";
-  BTFC_ASSIGN_OR_RETURN(BdiChunks file, BdiChunks::open(wf.path));
-  const uint64_t chunk_buffers = k_stream_bytes_per_value * desc.abrdf_size() * file.chunk_count(0);
-  if (chunk_buffers + plan.fixed_bytes > limit)
-    return invalid_argument(wf.path + ": its chunks of " + std::to_string(file.chunk_count(0)) + " texels need " + format_bytes(chunk_buffers) +
-                            " of buffers, more than --max-memory " + format_bytes(limit));
-  if (file.desc().abrdf_size() != desc.abrdf_size() || file.desc().num_texels() != desc.num_texels())
-    return invalid_argument(file.path() + ": working file shape (" + file.desc().summary() + ") differs from the BTF's (" + desc.summary() + ")");
-  return run(BdiChunkSource(file), wf);
+  OutOfCoreJob job;
+  job.input = in, job.spec = spec, job.max_bytes = limit, job.seed = seed, job.work_file = work_file, job.temp_dir = temp_dir;
+  job.progress = &progress;
+  job.notes = !g.quiet && !g.json;
+  Collective single;
+  BTFC_ASSIGN_OR_RETURN(out, compress_out_of_core(job, single));
+  const WorkFile& wf = out.work;
+  report = json{{"max_memory", limit},
+                {"work_file", wf.path},
+                {"work_file_built", wf.built},
+                {"work_file_reused", wf.reused},
+                {"work_file_seconds", wf.seconds},
+                {"work_file_bytes", wf.bytes_written},
+                {"work_file_scale", wf.scale},
+                {"work_file_note", wf.note},
+                {"chunks", out.chunks},
+                {"chunk_texels", out.chunk_texels},
+                {"passes", out.stats.passes},
+                {"bytes_read", out.stats.bytes_read},
+                {"pass_seconds", out.stats.pass_seconds},
+                {"factorize_seconds", out.factorize_seconds},
+                {"buffer_bytes", out.stats.buffer_bytes}};
+  return std::move(out.model);
 }
 
 void print_report(const json& r) {
@@ -140,23 +81,25 @@ void print_report(const json& r) {
 
 }  // namespace
 
-bool compress_streamed(const Global& g, const CompressArgs& a, int& code) {
+bool compress_streamed(const Global& g, const CompressArgs& a, const BtfDesc& in_desc, int& code) {
   auto limit = limit_of(a.max_memory);
   if (!limit.ok()) return code = fail(g, limit.status()), true;
-  auto desc = probe_btf(a.in);
-  if (!desc.ok()) return false;  // the in-core path reports the problem
+  const BtfDesc* desc = &in_desc;
   if (desc->num_values() * 4 <= *limit && a.work_file.empty()) return false;
   const auto t0 = Clock::now();
   json report;
-  TempFile temp;
+  OutOfCoreResult ooc;
   std::error_code ec;
   const std::filesystem::path parent = std::filesystem::absolute(a.out, ec).parent_path();
-  auto model = encode_streamed(g, a.in, desc.value(), a.spec, a.work_file, parent.string(), *limit, a.seed, report, temp);
-  if (!model.ok()) return code = fail(g, model.status().with_context(a.in)), true;
+  if (auto r = resolve_spec(a.spec); r.ok() && !r->first->streaming())
+    return code = fail(g, invalid_argument(a.in + ": the BTF (" + format_bytes(desc->num_values() * 4) + " as float32) does not fit in --max-memory " +
+                                           format_bytes(*limit) + "; " + r->first->name() + " needs it in memory (" + streaming_codec_names() +
+                                           " compress" + (streaming_codec_names().find(',') == std::string::npos ? "es" : "") + " out of core)")),
+           true;
+  auto model = encode_streamed(g, a.in, a.spec, a.work_file, parent.string(), *limit, a.seed, report, ooc);
+  if (!model.ok()) return code = fail(g, model.status()), true;
   const double enc_s = since(t0);
-  auto spec = resolve_spec(a.spec);
-  Status s = ends_with(a.out, ".btf") ? write_bonn(*model.value(), a.out, spec->second.get("precision") == "half")
-                                      : save_model(*model.value(), *spec->first, a.out);
+  Status s = write_model(*model.value(), a.out);
   if (!s.ok()) return code = fail(g, s), true;
   report["peak_rss_bytes"] = peak_rss_bytes();
   const double ratio = double(desc->num_values()) * 4.0 / double(std::filesystem::file_size(a.out));
@@ -243,9 +186,9 @@ bool bench_streamed(const Global& g, const BenchArgs& a, int& code) {
   register_work_dir(temp_dir);  // SIGINT / SIGTERM remove the working file there too
   for (const std::string& spec : a.specs) {
     json report;
-    TempFile temp;
+    OutOfCoreResult ooc;
     const auto t0 = Clock::now();
-    auto model = encode_streamed(g, a.in, desc.value(), spec, "", temp_dir, *limit, a.seed, report, temp);
+    auto model = encode_streamed(g, a.in, spec, "", temp_dir, *limit, a.seed, report, ooc);
     if (!model.ok()) return code = fail(g, model.status().with_context(a.in)), true;
     const double enc_s = since(t0);
     // The reference is what the factorization read: the raw .btfc in place, or the working file.

@@ -20,6 +20,9 @@
 
 namespace btfc {
 
+class StreamingEncoder;  // codecs/streaming.h
+struct EnvironmentSH;    // core/sh.h
+
 // Run-time context: deterministic seed, progress sink, memory limit.
 struct Context {
   uint64_t seed = 1;
@@ -77,6 +80,11 @@ class Model {
   // The arrays a real-time renderer of this codec's paper reads (eigen-textures, weight maps,
   // codebooks, index maps...), named and shaped; exporters lay them out as GPU textures.
   virtual Result<std::vector<Tensor>> gpu_tensors() const { return std::vector<Tensor>{}; }
+  // Precomputed radiance transfer for one fixed lighting (codecs whose paper has it: lpca): the
+  // model keeps what gpu_tensors() then adds for `env` (world frame, sample lying flat).
+  virtual Status attach_environment(const EnvironmentSH& env) {
+    return invalid_argument(spec() + ": this codec has no precomputed radiance transfer for an environment");
+  }
 
   // Writes the model's tensors (the container's DESC and CODC are written by the caller).
   virtual Status save(ContainerWriter& w) const = 0;
@@ -102,10 +110,26 @@ class Codec {
   // For each the knob is searched and the most accurate (PSNR) model that fits wins. Empty: the
   // knob alone.
   virtual std::vector<std::string> budget_variants() const { return {}; }
+  // Out of core (codecs/streaming.h): the encoder that works from column chunks of a BTF it
+  // never holds whole, or null when the codec needs the BTF in memory.
+  virtual const StreamingEncoder* streaming() const { return nullptr; }
 };
 
-// The explicit codec table.
-std::span<const Codec* const> all_codecs();
+// The explicit codec table (codecs/registry.cpp): one entry per codec names the codec and its
+// GPU exporter (codecs/gpu_export.h; null when it has none).
+namespace gpu {
+struct Exporter;
+}
+struct CodecEntry {
+  const Codec* codec;
+  const gpu::Exporter* exporter;
+};
+std::span<const CodecEntry> codec_registry();
+std::span<const Codec* const> all_codecs();  // the registry's codecs, in its order
+// Appends a codec defined outside the library (tests/toy_codec: the test-only codec) to the
+// table: one explicit call, no static self-registration inside the library. Call it before the
+// first lookup (not thread-safe); a name already in the table is ignored.
+void register_codec(const CodecEntry& entry);
 const Codec* find_codec(const std::string& name);
 
 // Parses and binds a spec string ("fmf:rank=32") to its codec's parameter table.

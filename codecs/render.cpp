@@ -4,7 +4,7 @@
 #include <cmath>
 #include <memory>
 
-#include "codecs/lpca/sh.h"  // hemisphere_cell_weights: the same quadrature lpca's SH projection uses
+#include "core/sh.h"  // hemisphere_cell_weights: the same quadrature lpca's SH projection uses
 #include "core/interp.h"
 #include "core/metrics.h"
 

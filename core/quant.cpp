@@ -7,7 +7,7 @@
 #include <cmath>
 #include <cstring>
 
-#include "codecs/fmf/dct.h"
+#include "core/dct.h"
 
 namespace btfc::quant {
 namespace {
@@ -98,9 +98,9 @@ void dct_column(const float* v, size_t stride, const Layout& L, double inv_step,
         const size_t sx = std::min(x0 + x, W - 1), sy = std::min(y0 + y, H - 1);
         block[y * 8 + x] = v[(sx + W * sy) * stride];
       }
-    bsvtf::fdct8x8(block, 8, c);
+    dct::fdct8x8(block, 8, c);
     for (size_t z = 0; z < 64; ++z) {
-      const double r = std::round(c[bsvtf::k_zigzag[z]] * inv_step);
+      const double r = std::round(c[dct::k_zigzag[z]] * inv_step);
       if (!(std::fabs(r) <= k_max_int)) overflow = true;
       q[z * nb + b] = overflow ? 0 : int32_t(r);
     }
@@ -112,8 +112,8 @@ void idct_column(const int32_t* q, float step, const Layout& L, float* v, size_t
   double c[64];
   float block[64];
   for (size_t b = 0; b < nb; ++b) {
-    for (size_t z = 0; z < 64; ++z) c[bsvtf::k_zigzag[z]] = double(q[z * nb + b]) * double(step);
-    bsvtf::idct8x8(c, block, 8);
+    for (size_t z = 0; z < 64; ++z) c[dct::k_zigzag[z]] = double(q[z * nb + b]) * double(step);
+    dct::idct8x8(c, block, 8);
     const size_t x0 = (b % bx) * 8, y0 = (b / bx) * 8;
     for (size_t y = 0; y < 8 && y0 + y < H; ++y)
       for (size_t x = 0; x < 8 && x0 + x < W; ++x) v[(x0 + x + W * (y0 + y)) * stride] = block[y * 8 + x];

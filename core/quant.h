@@ -5,7 +5,7 @@
 // rows) holds value[r][k] = step[k] * q[r][k] with integers q and one step per column ("per
 // component"), so a codec chooses the precision of each column. Optionally each column is an
 // image of width x height texels (rows = width * height, x fastest) coded as its orthonormal
-// 8 x 8 DCT (codecs/fmf/dct.h; the image padded to multiples of 8 by repeating its edge): then q
+// 8 x 8 DCT (core/dct.h; the image padded to multiples of 8 by repeating its edge): then q
 // are DCT coefficients, step[k] their quantisation step, and the values are the inverse DCT
 // cropped to the image. The DCT is orthonormal, so a step means the same squared error per value
 // in both forms (step^2 / 12 for uniform rounding).

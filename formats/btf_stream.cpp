@@ -1,5 +1,6 @@
 // Bounded-memory BTF input / output; see btf_stream.h.
 #include "formats/btf_stream.h"
+#include "formats/reader.h"
 
 #include <sys/stat.h>
 #include <unistd.h>
@@ -11,7 +12,6 @@
 #include <filesystem>
 #include <future>
 
-#include "codecs/fmf/ooc_fmf.h"
 #include "core/container.h"
 #include "formats/bonn/bdi_work.h"
 #include "formats/bonn/bonn_btf.h"
@@ -120,16 +120,8 @@ Status fill(const std::string& input, BdiWriter& w, const BtfDesc& d, size_t max
 }  // namespace
 
 Result<BtfDesc> probe_btf(const std::string& path) {
-  std::error_code ec;
-  if (fs::is_directory(path, ec)) {
-    BTFC_ASSIGN_OR_RETURN(ImageSetPlan plan, plan_image_set(path));
-    return plan.desc;
-  }
-  if (!fs::exists(path, ec)) return io_error(path + ": no such file or directory");
-  BtfDesc d;
-  if (is_raw_btfc(path, &d)) return d;
-  BTFC_ASSIGN_OR_RETURN(auto model, open_model(path));
-  return model->desc();
+  BTFC_ASSIGN_OR_RETURN(std::unique_ptr<BtfInput> in, open_input(path));
+  return in->desc();
 }
 
 Result<WorkFile> prepare_work_file(const std::string& input, const std::string& work_path, uint32_t lines, size_t max_bytes,
@@ -245,7 +237,7 @@ Result<Metrics> compare_streamed(const BdiChunks& ref, const Model& model) {
   return compare_streamed(BdiChunkSource(ref), ref.desc(), ref.path(), model);
 }
 
-Result<Metrics> compare_streamed(const fmf::ChunkSource& ref, const BtfDesc& d, const std::string& path, const Model& model) {
+Result<Metrics> compare_streamed(const ChunkSource& ref, const BtfDesc& d, const std::string& path, const Model& model) {
   if (model.desc().abrdf_size() != d.abrdf_size() || model.desc().num_texels() != d.num_texels() || ref.rows() != d.abrdf_size() ||
       ref.texels() != d.num_texels())
     return invalid_argument(path + ": model shape differs from the reference BTF");

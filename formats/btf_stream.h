@@ -17,7 +17,7 @@
 #include <memory>
 
 #include "codecs/codec.h"
-#include "codecs/fmf/ooc_svd.h"
+#include "core/chunks.h"
 #include "core/btf.h"
 #include "core/progress.h"
 #include "formats/raw_btfc.h"
@@ -59,5 +59,5 @@ class BdiChunks;
 // BTF in `ref`, chunk by chunk; mean_ssim is NaN (SSIM needs whole images).
 Result<Metrics> compare_streamed(const BdiChunks& ref, const Model& model);
 // The same against any chunk source of whole texel rows (`path` names it in errors).
-Result<Metrics> compare_streamed(const fmf::ChunkSource& ref, const BtfDesc& desc, const std::string& path, const Model& model);
+Result<Metrics> compare_streamed(const ChunkSource& ref, const BtfDesc& desc, const std::string& path, const Model& model);
 }  // namespace btfc

@@ -290,10 +290,7 @@ Status plan_impl(const std::string& path, BtfDesc& desc, std::vector<ImageFile>&
   return desc.validate().with_context(path);
 }
 
-Result<Btf> read_impl(const std::string& path) {
-  BtfDesc desc;
-  std::vector<ImageFile> files;
-  BTFC_RETURN_IF_ERROR(plan_impl(path, desc, files));
+Result<Btf> read_planned(const BtfDesc& desc, const std::vector<ImageFile>& files) {
   BTFC_ASSIGN_OR_RETURN(Btf btf, Btf::create(desc));
   const size_t nl = desc.num_lights(), nv = desc.num_views();
 
@@ -325,6 +322,13 @@ Result<Btf> read_impl(const std::string& path) {
   for (const Status& s : errors)
     if (!s.ok()) return s;
   return btf;
+}
+
+Result<Btf> read_impl(const std::string& path) {
+  BtfDesc desc;
+  std::vector<ImageFile> files;
+  BTFC_RETURN_IF_ERROR(plan_impl(path, desc, files));
+  return read_planned(desc, files);
 }
 
 }  // namespace
@@ -378,6 +382,18 @@ Result<ImageSetPlan> plan_image_set(const std::string& path) {
     return p;
   } catch (const std::exception& e) {
     return io_error(path + ": " + e.what());
+  }
+}
+
+Result<Btf> read_image_set(const ImageSetPlan& plan) {
+  std::vector<ImageFile> files(plan.files.size());
+  for (size_t i = 0; i < files.size(); ++i) files[i] = {plan.files[i], int(i % plan.desc.num_lights()), int(i / plan.desc.num_lights())};
+  try {
+    return read_planned(plan.desc, files);
+  } catch (const std::bad_alloc&) {
+    return io_error(plan.path + ": out of memory reading the image set");
+  } catch (const std::exception& e) {
+    return io_error(plan.path + ": " + e.what());
   }
 }
 

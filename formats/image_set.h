@@ -54,6 +54,8 @@ Result<ImageSetPlan> plan_image_set(const std::string& path);
 // Images [first, last) of the plan, image-major: dst[((i - first) * texels + t) * 3 + c]
 // (decoded in parallel; same conversions and errors as read_image_set).
 Status read_images(const ImageSetPlan& plan, size_t first, size_t last, float* dst);
+// The whole set of a plan (read_image_set without planning again).
+Result<Btf> read_image_set(const ImageSetPlan& plan);
 
 enum class ImageFormat { exr, png };
 Status write_image_set(const Btf& btf, const std::string& dir, ImageFormat format);

@@ -51,7 +51,7 @@ uint32_t crc_and_check(uint32_t crc, const float* v, size_t n, size_t* bad) {
 // only their own chunks. Each chunk's values are checked finite the first time it is seen.
 // (A file truncated by another process while mapped would raise SIGBUS; its size is checked
 // at open.) A tensor at an offset not aligned for floats falls back to pread + copy.
-class RawChunks final : public fmf::ChunkSource {
+class RawChunks final : public ChunkSource {
  public:
   RawChunks(RawBands b, uint64_t per_chunk) : m_b(std::move(b)), m_per(per_chunk) {
     const uint64_t n = m_b.desc().num_texels();
@@ -121,7 +121,7 @@ class RawChunks final : public fmf::ChunkSource {
   // fills its own row), are joined in chunk order with crc32_combine and compared with the
   // tensor's CRC, on every process alike. Sweeps that do not tile every chunk (a caller that
   // streamed only some chunks) cannot be checked and are not.
-  Status finish_first_pass(fmf::Collective& coll) const override {
+  Status finish_first_pass(Collective& coll) const override {
     const size_t P = size_t(coll.size()), r = size_t(coll.rank());
     std::vector<double> t(3 * P, 0.0);
     {
@@ -229,11 +229,11 @@ Status RawBands::pread_all(void* dst, uint64_t n, uint64_t off) const {
   return {};
 }
 
-Result<std::unique_ptr<fmf::ChunkSource>> open_raw_chunks(const std::string& path, uint32_t lines_per_chunk) {
+Result<std::unique_ptr<ChunkSource>> open_raw_chunks(const std::string& path, uint32_t lines_per_chunk) {
   if (!is_raw_btfc(path, nullptr)) return invalid_argument(path + ": not a raw (uncompressed) .btfc");
   BTFC_ASSIGN_OR_RETURN(RawBands b, RawBands::open(path));
   const uint64_t per = uint64_t(std::max<uint32_t>(lines_per_chunk, 1)) * uint64_t(b.desc().width);
-  return std::unique_ptr<fmf::ChunkSource>(std::make_unique<RawChunks>(std::move(b), per));
+  return std::unique_ptr<ChunkSource>(std::make_unique<RawChunks>(std::move(b), per));
 }
 
 

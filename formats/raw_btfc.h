@@ -9,7 +9,7 @@
 #include <memory>
 #include <string>
 
-#include "codecs/fmf/ooc_svd.h"
+#include "core/chunks.h"
 #include "core/btf.h"
 #include "core/status.h"
 
@@ -55,6 +55,6 @@ class RawBands {
 // The tensor CRC is accumulated over each process's first in-order sweep and checked after the
 // first pass (the processes' parts joined: finish_first_pass), each chunk's values checked
 // finite when first seen.
-Result<std::unique_ptr<fmf::ChunkSource>> open_raw_chunks(const std::string& path, uint32_t lines_per_chunk);
+Result<std::unique_ptr<ChunkSource>> open_raw_chunks(const std::string& path, uint32_t lines_per_chunk);
 
 }  // namespace btfc

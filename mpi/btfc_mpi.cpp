@@ -1,4 +1,5 @@
-// btfc-mpi: `fmf` compression spread over MPI ranks (mpirun -n N btfc-mpi compress ...).
+// btfc-mpi: compression of any codec that streams (Codec::streaming(): fmf) spread over MPI ranks
+// (mpirun -n N btfc-mpi compress ...). The encode is formats/out_of_core.h's compress_out_of_core.
 //
 //   btfc-mpi compress INPUT -c SPEC -o OUT [--max-memory SIZE] [--work-file PATH] [--seed N] [--json] [-q]
 //
@@ -27,12 +28,11 @@
 #include <string>
 
 #include "codecs/codec.h"
-#include "codecs/fmf/ooc_fmf.h"
 #include "core/blas_env.h"
 #include "core/memory.h"
-#include "formats/bonn/bdi_work.h"
 #include "formats/btf_io.h"
 #include "formats/btf_stream.h"
+#include "formats/out_of_core.h"
 #include "mpi/mpi_collective.h"
 
 using namespace btfc;
@@ -91,15 +91,6 @@ double since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-// Broadcasts a string from rank 0.
-std::string bcast(std::string s) {
-  int n = int(s.size());
-  MPI_Bcast(&n, 1, MPI_INT, 0, MPI_COMM_WORLD);
-  s.resize(size_t(n));
-  MPI_Bcast(s.data(), n, MPI_CHAR, 0, MPI_COMM_WORLD);
-  return s;
-}
-
 int run(int argc, char** argv, MpiCollective& coll) {
   const bool root = coll.rank() == 0;
   const auto t_start = std::chrono::steady_clock::now();
@@ -118,96 +109,26 @@ int run(int argc, char** argv, MpiCollective& coll) {
   }
   auto limit = a.max_memory.empty() ? Result<size_t>(default_max_memory()) : parse_size(a.max_memory);
   if (!limit.ok()) return finish(limit.status());
-  auto resolved = resolve_spec(a.spec);
-  if (!resolved.ok()) return finish(resolved.status());
-  Params params = resolved->second;
-  if (std::string(resolved->first->name()) != "fmf")
-    return finish(invalid_argument("btfc-mpi compresses with fmf only (got " + std::string(resolved->first->name()) + ")"));
-
-  // Raw .btfc: in place on every rank, when float chunks fit the limit (as in btfc compress;
-  // otherwise the half working file, whose chunks are smaller) and every rank sees the file
-  // (the decision is summed over ranks, so all take the same branch). Otherwise rank 0 prepares
-  // the working file; the others wait for the agreed outcome.
-  BtfDesc desc;
-  uint32_t raw_lines = 0;
-  if (a.work_file.empty() && is_raw_btfc_file(a.in)) {
-    auto d = probe_btf(a.in);
-    // Sized for 12 bytes per value, as btfc compress does (mapped chunks take 8).
-    // A spec that cannot stream (plan error) takes the working-file branch, where rank 0 reports it.
-    if (d.ok()) {
-      desc = d.value();
-      auto plan = plan_streamed_fmf(params, desc, *limit);
-      if (plan.ok()) raw_lines = stream_lines_per_chunk(desc, plan.value(), *limit / 12 * 10);
-    }
-  }
-  double votes = raw_lines > 0 ? 1.0 : 0.0;
-  s = coll.allreduce_sum(&votes, 1);
-  if (!s.ok()) return finish(s);
-  const bool in_place = votes == double(coll.size());
-  WorkFile wf;
-  std::string temp;
-  if (root && !in_place) {
-    s = [&]() -> Status {
-      BTFC_ASSIGN_OR_RETURN(desc, probe_btf(a.in));
-      BTFC_ASSIGN_OR_RETURN(StreamPlan plan, plan_streamed_fmf(params, desc, *limit));
-      const uint32_t lines = stream_lines_per_chunk(desc, plan, *limit);
-      if (lines == 0) return invalid_argument("--max-memory " + format_bytes(*limit) + " is too small for " + desc.summary());
-      std::string work = a.work_file;
-      if (work.empty()) {
-        std::error_code ec;
-        work = std::filesystem::absolute(a.out, ec).parent_path().string() + "/.btfc-work-" + std::to_string(::getpid()) + ".btf";
-        temp = work;
-      }
-      Progress progress(a.quiet || a.json);
-      BTFC_ASSIGN_OR_RETURN(wf, prepare_work_file(a.in, work, lines, *limit, &progress));
-      if (wf.path != work) temp.clear();  // the input itself is the working file
-      if (!wf.note.empty() && !a.quiet && !a.json) std::cerr << "note: " << wf.note << "\n";
-      return {};
-    }();
-  }
-  struct Cleanup {
-    std::string path;
-    ~Cleanup() {
-      if (!path.empty()) std::filesystem::remove(path);
-    }
-  } cleanup{temp};
-  s = coll.agree(s);
-  if (!s.ok()) return finish(s);
-  std::unique_ptr<fmf::ChunkSource> src;
-  std::optional<BdiChunks> file;
-  if (in_place) {
-    auto opened = open_raw_chunks(a.in, raw_lines);
-    s = coll.agree(opened.ok() ? Status{} : opened.status());
-    if (!s.ok()) return finish(s);
-    src = std::move(opened.value());
-    wf.path = a.in;
-  } else {
-    const std::string work_path = bcast(wf.path);
-    auto opened = BdiChunks::open(work_path);
-    s = coll.agree(opened.ok() ? Status{} : opened.status());
-    if (!s.ok()) return finish(s);
-    file.emplace(std::move(opened.value()));
-    if (!root) desc = file->desc();
-    src = std::make_unique<BdiChunkSource>(*file);
-  }
-
+  // The whole streamed encode (in place or through rank 0's working file, agreed failures) is
+  // the library's (formats/out_of_core.h), the same call `btfc compress --max-memory` makes.
   Progress progress(a.quiet || a.json || !root);
-  Context ctx;
-  ctx.seed = a.seed;
-  ctx.progress = &progress;
-  ctx.max_bytes = *limit;
-  const auto t0 = std::chrono::steady_clock::now();
-  auto enc = encode_fmf_streamed(*src, desc, params, ctx, coll);
-  s = coll.agree(enc.ok() ? Status{} : enc.status());  // streaming_svd's failures are already agreed
-  if (!s.ok()) return finish(s);
-  const double factor_s = since(t0);
-  if (root) {
-    const Model& m = *enc->model;
-    s = a.out.size() > 4 && a.out.compare(a.out.size() - 4, 4, ".btf") == 0 ? write_bonn(m, a.out, params.get("precision") == "half")
-                                                                             : save_model(m, *resolved->first, a.out);
-  }
+  OutOfCoreJob job;
+  job.input = a.in, job.spec = a.spec, job.max_bytes = *limit, job.seed = a.seed, job.work_file = a.work_file;
+  std::error_code ec;
+  job.temp_dir = std::filesystem::absolute(a.out, ec).parent_path().string();
+  job.progress = &progress;
+  job.notes = root && !a.quiet && !a.json;
+  auto enc = compress_out_of_core(job, coll);
+  if (!enc.ok()) return finish(enc.status());
+  const double factor_s = enc->factorize_seconds;
+  const bool in_place = enc->in_place;
+  const WorkFile& wf = enc->work;
+  if (root) s = write_model(*enc->model, a.out);
   s = coll.agree(s);
-  if (!s.ok()) return finish(s);
+  if (!s.ok()) {
+    MPI_Barrier(MPI_COMM_WORLD);
+    return finish(s);
+  }
 
   // Per-rank measurements, gathered for the report.
   double mine[4] = {double(enc->stats.bytes_read), 0, enc->stats.reduce_seconds, double(peak_rss_bytes())};
@@ -229,7 +150,7 @@ int run(int argc, char** argv, MpiCollective& coll) {
                 << enc->stats.passes << " passes, factorization " << factor_s << " s, rank 0 read "
                 << format_bytes(enc->stats.bytes_read) << ", allreduce " << enc->stats.reduce_seconds << " s\n";
   }
-  MPI_Barrier(MPI_COMM_WORLD);  // every rank is done reading before rank 0 removes a temporary working file
+  MPI_Barrier(MPI_COMM_WORLD);  // every rank is done reading before rank 0 removes a temporary working file (~enc)
   return 0;
 }
 

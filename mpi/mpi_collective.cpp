@@ -53,4 +53,13 @@ Status MpiCollective::agree(const Status& local) {
   return Status(StatusCode(code), "rank " + std::to_string(first) + ": " + msg);
 }
 
+Status MpiCollective::broadcast(std::string& s) {
+  unsigned long long n = s.size();
+  if (MPI_Bcast(&n, 1, MPI_UNSIGNED_LONG_LONG, 0, m_comm) != MPI_SUCCESS) return io_error("MPI_Bcast failed");
+  if (n > (1u << 30)) return invalid_argument("broadcast: string of " + std::to_string(n) + " bytes");
+  s.resize(size_t(n));
+  if (MPI_Bcast(s.data(), int(n), MPI_CHAR, 0, m_comm) != MPI_SUCCESS) return io_error("MPI_Bcast failed");
+  return {};
+}
+
 }  // namespace btfc

@@ -6,7 +6,7 @@
 #include <fstream>
 #include <iterator>
 
-#include "codecs/fmf/bsvtf.h"
+#include "formats/bsvtf/bsvtf.h"
 #include "tests/bsvtf_fixture.h"
 
 using namespace btfc;

@@ -1,4 +1,4 @@
-// BSVTF (codecs/fmf/bsvtf.h): DCT, quantisation, closed-loop parent prediction, format checks.
+// BSVTF (formats/bsvtf/bsvtf.h): DCT, quantisation, closed-loop parent prediction, format checks.
 #include <gtest/gtest.h>
 #include <omp.h>
 #include <unistd.h>
@@ -7,8 +7,8 @@
 #include <fstream>
 #include <iterator>
 
-#include "codecs/fmf/bsvtf.h"
-#include "codecs/fmf/dct.h"
+#include "formats/bsvtf/bsvtf.h"
+#include "core/dct.h"
 #include "tests/bsvtf_fixture.h"
 
 using namespace btfc;
@@ -53,24 +53,24 @@ TEST(Bsvtf, DctRoundTripAndOrthonormality) {
   float block[64], back[64];
   for (float& v : block) v = u(rng);
   double coef[64];
-  bsvtf::fdct8x8(block, 8, coef);
+  dct::fdct8x8(block, 8, coef);
   double e_in = 0, e_out = 0, mean = 0;
   for (int i = 0; i < 64; ++i) e_in += double(block[i]) * block[i], e_out += coef[i] * coef[i], mean += block[i] / 64.0;
   EXPECT_NEAR(e_out, e_in, 1e-9 * e_in);  // Parseval: orthonormal
   EXPECT_NEAR(coef[0], 8 * mean, 1e-9);    // JPEG's DC scaling
-  bsvtf::idct8x8(coef, back, 8);
+  dct::idct8x8(coef, back, 8);
   for (int i = 0; i < 64; ++i) EXPECT_NEAR(back[i], block[i], 1e-5);
 }
 
 TEST(Bsvtf, QuantStepsFollowTheIjgRule) {
-  const auto s50 = bsvtf::quant_steps(50, 255.0f), s100 = bsvtf::quant_steps(100, 2.0f), s10 = bsvtf::quant_steps(10, 255.0f);
+  const auto s50 = dct::quant_steps(50, 255.0f), s100 = dct::quant_steps(100, 2.0f), s10 = dct::quant_steps(10, 255.0f);
   for (int k = 0; k < 64; ++k) {
-    EXPECT_FLOAT_EQ(s50[size_t(k)], float(bsvtf::k_jpeg_luma[size_t(k)]));
+    EXPECT_FLOAT_EQ(s50[size_t(k)], float(dct::k_jpeg_luma[size_t(k)]));
     EXPECT_FLOAT_EQ(s100[size_t(k)], 2.0f / 255.0f);
-    EXPECT_FLOAT_EQ(s10[size_t(k)], float((bsvtf::k_jpeg_luma[size_t(k)] * 500 + 50) / 100));
+    EXPECT_FLOAT_EQ(s10[size_t(k)], float((dct::k_jpeg_luma[size_t(k)] * 500 + 50) / 100));
   }
   for (int q = 2; q <= 100; ++q)  // finer with quality, never coarser
-    EXPECT_LE(bsvtf::quant_steps(q, 1.0f)[5], bsvtf::quant_steps(q - 1, 1.0f)[5]);
+    EXPECT_LE(dct::quant_steps(q, 1.0f)[5], dct::quant_steps(q - 1, 1.0f)[5]);
 }
 
 TEST(Bsvtf, GeometryLevelsAndOddSizes) {

@@ -12,7 +12,7 @@
 #include "codecs/lpca/lpca.h"
 #include "codecs/lpca/lpca_export.h"
 #include "codecs/lpca/lpca_model.h"
-#include "codecs/lpca/sh.h"
+#include "core/sh.h"
 #include "tests/export_test_util.h"
 
 using namespace btfc;

@@ -1,4 +1,4 @@
-// Scene budgets (formats/gpu/scene.h): scene.json parsing, what the fmf export keeps for a
+// Scene budgets (core/scene.h): scene.json parsing, what the fmf export keeps for a
 // scene (mip levels, directions in cones, components within a GPU budget), the predicted error,
 // and the cut model model.bsvtf is built from.
 #include <gtest/gtest.h>
@@ -6,7 +6,7 @@
 #include <cmath>
 #include <random>
 
-#include "codecs/fmf/fmf_export.h"
+#include "codecs/fmf/fmf.h"
 #include "core/interp.h"
 #include "formats/gpu/export.h"
 #include "tests/export_test_util.h"

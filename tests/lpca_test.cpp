@@ -11,7 +11,8 @@
 
 #include "codecs/lpca/clustering.h"
 #include "codecs/lpca/lpca.h"
-#include "codecs/lpca/sh.h"
+#include "formats/exr/envmap.h"
+#include "core/sh.h"
 #include "core/synth.h"
 
 using namespace btfc;
@@ -428,7 +429,7 @@ TEST(LpcaRelight, ExrRoundTripAndEnvironmentProjection) {
   EXPECT_EQ(w, W);
   EXPECT_EQ(h, H);
   EXPECT_EQ(*back, img);
-  auto e1 = project_environment(path, 4);
+  auto e1 = read_environment(path, 4);
   auto e2 = project_latlong(img.data(), W, H, 4);
   ASSERT_TRUE(e1.ok() && e2.ok());
   EXPECT_EQ(e1->coeffs, e2->coeffs);
@@ -436,7 +437,7 @@ TEST(LpcaRelight, ExrRoundTripAndEnvironmentProjection) {
   const EnvironmentSH a = analytic_env(4);
   for (size_t j = 0; j < a.coeffs.size(); ++j) EXPECT_NEAR(e2->coeffs[j] / 1e4, a.coeffs[j], 3e-3) << j;
   std::remove(path.c_str());
-  auto missing = project_environment(tmp_path("nope.exr"), 4);
+  auto missing = read_environment(tmp_path("nope.exr"), 4);
   ASSERT_FALSE(missing.ok());
   EXPECT_NE(missing.status().message().find("nope.exr"), std::string::npos);
   EXPECT_FALSE(project_latlong(img.data(), W, H, 17).ok());

@@ -10,7 +10,7 @@
 #include "codecs/fmf/fmf.h"
 #include "codecs/fmf/ooc_dfmf.h"
 #include "codecs/fmf/ooc_fmf.h"
-#include "codecs/fmf/svd.h"
+#include "core/svd.h"
 #include "tests/ooc_test_util.h"
 
 using namespace btfc;
@@ -34,10 +34,10 @@ Btf noisy(int w, int h) {
 }
 
 // encode_fmf_streamed over `p` thread-simulated processes; returns process 0's result.
-Result<StreamedEncode> encode_on(int p, const fmf::ChunkSource& src, const Btf& b, const Params& params) {
+Result<StreamedEncode> encode_on(int p, const ChunkSource& src, const Btf& b, const Params& params) {
   std::vector<Result<StreamedEncode>> res;
   for (int r = 0; r < p; ++r) res.emplace_back(Status{});
-  run_group(p, [&](fmf::Collective& me, int r) {
+  run_group(p, [&](Collective& me, int r) {
     Context ctx;
     res[size_t(r)] = encode_fmf_streamed(src, b.desc(), params, ctx, me);
   });
@@ -70,7 +70,7 @@ TEST(StreamingDfmf, MatchesInCoreDfmfFromCopiedAndMappedChunks) {
   for (bool mapped : {false, true}) {
     MemorySource src(b, 50);  // 8 chunks, the last one short
     src.mapped = mapped;
-    fmf::Collective one;
+    Collective one;
     auto st = encode_fmf_streamed(src, b.desc(), spec->second, ctx, one);
     ASSERT_TRUE(st.ok()) << st.status().message();
     const Model& m = *st->model;
@@ -115,14 +115,14 @@ TEST(StreamingDfmf, ChannelChunksAreTheInCoreTransform) {
 TEST(StreamingExact, MatchesTheInCoreExactSvd) {
   const Btf b = synth(24, 24);  // 486 x 576: the rows side is the small one, as in core
   const size_t m = b.desc().abrdf_size(), n = b.desc().num_texels();
-  fmf::SvdOptions opt;
-  opt.max_rank = 12, opt.method = fmf::SvdMethod::exact;
-  auto in_core = fmf::truncated_svd(b.data(), m, n, opt);
+  SvdOptions opt;
+  opt.max_rank = 12, opt.method = SvdMethod::exact;
+  auto in_core = truncated_svd(b.data(), m, n, opt);
   ASSERT_TRUE(in_core.ok());
   MemorySource src(b, 70);
-  fmf::Collective one;
-  fmf::StreamStats st;
-  auto streamed = fmf::streaming_exact_svd(src, fmf::owned_chunks(src, 0, 1), opt, one, &st);
+  Collective one;
+  StreamStats st;
+  auto streamed = fmf::streaming_exact_svd(src, owned_chunks(src, 0, 1), opt, one, &st);
   ASSERT_TRUE(streamed.ok()) << streamed.status().message();
   EXPECT_EQ(st.passes, 2);
   EXPECT_EQ(st.bytes_read, uint64_t(2) * m * n * 4);
@@ -137,19 +137,19 @@ TEST(StreamingExact, MatchesTheInCoreExactSvd) {
   EXPECT_LT((Ui * Ui.transpose() - Us * Us.transpose()).norm(), 1e-5);
   // Mapped chunks give the same factorization.
   src.mapped = true;
-  auto mapped = fmf::streaming_exact_svd(src, fmf::owned_chunks(src, 0, 1), opt, one);
+  auto mapped = fmf::streaming_exact_svd(src, owned_chunks(src, 0, 1), opt, one);
   ASSERT_TRUE(mapped.ok());
   EXPECT_LT((mapped->U - streamed->U).norm(), 1e-6);
 }
 
 TEST(StreamingExact, TargetErrorPicksTheInCoreRank) {
   const Btf b = synth(24, 24);
-  fmf::SvdOptions opt;
-  opt.max_rank = 40, opt.target_rel_error = 0.05, opt.method = fmf::SvdMethod::exact;
-  auto in_core = fmf::truncated_svd(b.data(), b.desc().abrdf_size(), b.desc().num_texels(), opt);
+  SvdOptions opt;
+  opt.max_rank = 40, opt.target_rel_error = 0.05, opt.method = SvdMethod::exact;
+  auto in_core = truncated_svd(b.data(), b.desc().abrdf_size(), b.desc().num_texels(), opt);
   MemorySource src(b, 100);
-  fmf::Collective one;
-  auto streamed = fmf::streaming_exact_svd(src, fmf::owned_chunks(src, 0, 1), opt, one);
+  Collective one;
+  auto streamed = fmf::streaming_exact_svd(src, owned_chunks(src, 0, 1), opt, one);
   ASSERT_TRUE(in_core.ok() && streamed.ok());
   EXPECT_GT(in_core->U.cols(), 1);
   EXPECT_LT(in_core->U.cols(), 40);
@@ -161,15 +161,15 @@ TEST(StreamingExact, TargetErrorPicksTheInCoreRank) {
 TEST(StreamingExact, ThreeProcessesGiveTheOneProcessResultAndAgreeOnFailures) {
   const Btf b = synth(16, 15);
   MemorySource src(b, 32);  // 8 chunks over 3 processes
-  fmf::SvdOptions opt;
+  SvdOptions opt;
   opt.max_rank = 8;
-  fmf::Collective one;
-  auto ref = fmf::streaming_exact_svd(src, fmf::owned_chunks(src, 0, 1), opt, one);
+  Collective one;
+  auto ref = fmf::streaming_exact_svd(src, owned_chunks(src, 0, 1), opt, one);
   ASSERT_TRUE(ref.ok());
   for (bool fail : {false, true}) {
     src.fail_chunk = fail ? 7 : size_t(-1);  // chunk 7 belongs to process 2
-    std::vector<Result<fmf::SvdResult>> res(3, Result<fmf::SvdResult>(Status{}));
-    run_group(3, [&](fmf::Collective& me, int r) { res[size_t(r)] = fmf::streaming_exact_svd(src, fmf::owned_chunks(src, r, 3), opt, me); });
+    std::vector<Result<SvdResult>> res(3, Result<SvdResult>(Status{}));
+    run_group(3, [&](Collective& me, int r) { res[size_t(r)] = fmf::streaming_exact_svd(src, owned_chunks(src, r, 3), opt, me); });
     if (fail) {
       for (int r = 0; r < 3; ++r)
         EXPECT_NE(res[size_t(r)].status().message().find("rank 2: cannot read chunk 7"), std::string::npos) << res[size_t(r)].status().message();
@@ -207,7 +207,7 @@ TEST(StreamingExact, StreamedDfmfExactMatchesInCore) {
   auto in_core = spec->first->encode(b, spec->second, ctx);
   ASSERT_TRUE(in_core.ok());
   MemorySource src(b, 100);
-  fmf::Collective one;
+  Collective one;
   auto st = encode_fmf_streamed(src, b.desc(), spec->second, ctx, one);
   ASSERT_TRUE(st.ok()) << st.status().message();
   const double e_in = model_error(b, *in_core.value()), e_st = model_error(b, *st->model);
@@ -241,6 +241,6 @@ TEST(StreamingExact, GramThatDoesNotFitIsRefusedNamingTheSizes) {
   MemorySource src(b, 16);
   Context ctx;
   ctx.max_bytes = size_t(4) << 20;
-  fmf::Collective one;
+  Collective one;
   EXPECT_EQ(encode_fmf_streamed(src, b.desc(), exact->second, ctx, one).status().code(), StatusCode::invalid_argument);
 }

@@ -17,7 +17,7 @@
 
 #include "codecs/codec.h"
 #include "codecs/fmf/ooc_fmf.h"
-#include "codecs/fmf/svd.h"
+#include "core/svd.h"
 #include "core/synth.h"
 #include "formats/bonn/bdi_work.h"
 #include "formats/bonn/bonn_btf.h"
@@ -110,14 +110,14 @@ TEST(BdiWork, ValuesBeyondHalfAskForAScaleAndScaledFilesReadBack) {
 TEST(StreamingSvd, MatchesTheInCoreRandomizedSvd) {
   const Btf b = synth(24, 20);  // 486 x 480
   const size_t m = b.desc().abrdf_size(), n = b.desc().num_texels();
-  fmf::SvdOptions opt;
-  opt.max_rank = 12, opt.oversample = 8, opt.power_iters = 2, opt.method = fmf::SvdMethod::randomized;
-  auto in_core = fmf::truncated_svd(b.data(), m, n, opt);
+  SvdOptions opt;
+  opt.max_rank = 12, opt.oversample = 8, opt.power_iters = 2, opt.method = SvdMethod::randomized;
+  auto in_core = truncated_svd(b.data(), m, n, opt);
   ASSERT_TRUE(in_core.ok());
   MemorySource src(b, 72);  // 7 chunks, the last one short
-  fmf::Collective one;
-  fmf::StreamStats st;
-  auto streamed = fmf::streaming_svd(src, fmf::owned_chunks(src, 0, 1), opt, one, &st);
+  Collective one;
+  StreamStats st;
+  auto streamed = fmf::streaming_svd(src, owned_chunks(src, 0, 1), opt, one, &st);
   ASSERT_TRUE(streamed.ok()) << streamed.status().message();
   EXPECT_EQ(st.passes, opt.power_iters + 2);
   EXPECT_EQ(st.bytes_read, uint64_t(opt.power_iters + 2) * m * n * 4);
@@ -134,13 +134,13 @@ TEST(StreamingSvd, MatchesTheInCoreRandomizedSvd) {
 TEST(StreamingSvd, ThreeProcessesGiveTheOneProcessResult) {
   const Btf b = synth(16, 15);
   MemorySource src(b, 32);  // 8 chunks over 3 processes
-  fmf::SvdOptions opt;
+  SvdOptions opt;
   opt.max_rank = 8, opt.oversample = 6, opt.power_iters = 2;
-  fmf::Collective one;
-  auto ref = fmf::streaming_svd(src, fmf::owned_chunks(src, 0, 1), opt, one);
+  Collective one;
+  auto ref = fmf::streaming_svd(src, owned_chunks(src, 0, 1), opt, one);
   ASSERT_TRUE(ref.ok());
-  std::vector<Result<fmf::SvdResult>> res(3, Result<fmf::SvdResult>(Status{}));
-  run_group(3, [&](fmf::Collective& me, int r) { res[size_t(r)] = fmf::streaming_svd(src, fmf::owned_chunks(src, r, 3), opt, me); });
+  std::vector<Result<SvdResult>> res(3, Result<SvdResult>(Status{}));
+  run_group(3, [&](Collective& me, int r) { res[size_t(r)] = fmf::streaming_svd(src, owned_chunks(src, r, 3), opt, me); });
   for (int r = 0; r < 3; ++r) ASSERT_TRUE(res[size_t(r)].ok()) << res[size_t(r)].status().message();
   const auto& got = res[0].value();
   ASSERT_EQ(got.SxV.rows(), ref->SxV.rows());
@@ -156,10 +156,10 @@ TEST(StreamingSvd, AFailingProcessStopsEveryProcessWithItsMessage) {
   const Btf b = synth(16, 15);
   MemorySource src(b, 32);
   src.fail_chunk = 7;  // owned by process 2 of 3
-  fmf::SvdOptions opt;
+  SvdOptions opt;
   opt.max_rank = 8, opt.oversample = 6, opt.power_iters = 1;
   std::vector<Status> st(3);
-  run_group(3, [&](fmf::Collective& me, int r) { st[size_t(r)] = fmf::streaming_svd(src, fmf::owned_chunks(src, r, 3), opt, me).status(); });
+  run_group(3, [&](Collective& me, int r) { st[size_t(r)] = fmf::streaming_svd(src, owned_chunks(src, r, 3), opt, me).status(); });
   for (int r = 0; r < 3; ++r) {
     EXPECT_EQ(st[size_t(r)].code(), StatusCode::io_error) << r;
     EXPECT_NE(st[size_t(r)].message().find("rank 2: cannot read chunk 7"), std::string::npos) << st[size_t(r)].message();
@@ -177,8 +177,8 @@ TEST(StreamingFmf, WorkingFileEncodeMatchesInCoreFmf) {
   Context ctx;
   auto in_core = spec->first->encode(b, spec->second, ctx);
   ASSERT_TRUE(in_core.ok());
-  fmf::Collective one;
-  auto st = encode_fmf_streamed(file.value(), b.desc(), spec->second, ctx, one);
+  Collective one;
+  auto st = encode_fmf_streamed(BdiChunkSource(file.value()), b.desc(), spec->second, ctx, one);
   ASSERT_TRUE(st.ok()) << st.status().message();
   ASSERT_TRUE(st->model);
   EXPECT_EQ(st->model->spec(), in_core.value()->spec());
@@ -205,8 +205,8 @@ TEST(StreamingFmf, NonFiniteValueInAChunkIsAnErrorNamingIt) {
   ASSERT_TRUE(file.ok());
   auto spec = resolve_spec("fmf:rank=4:oversample=4:power_iters=1");
   Context ctx;
-  fmf::Collective one;
-  auto st = encode_fmf_streamed(file.value(), b.desc(), spec->second, ctx, one);
+  Collective one;
+  auto st = encode_fmf_streamed(BdiChunkSource(file.value()), b.desc(), spec->second, ctx, one);
   ASSERT_FALSE(st.ok());
   EXPECT_EQ(st.status().code(), StatusCode::corrupt_data);
   EXPECT_NE(st.status().message().find("BDI chunk 2 holds a non-finite value at texel (7, 5)"), std::string::npos) << st.status().message();

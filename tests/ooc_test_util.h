@@ -34,7 +34,7 @@ inline Status write_bdi(const Btf& b, const std::string& path, uint32_t lines, f
 }
 
 // The whole matrix as chunks of `per` texels, straight from memory (no half rounding).
-class MemorySource final : public fmf::ChunkSource {
+class MemorySource final : public ChunkSource {
  public:
   MemorySource(const Btf& b, size_t per) : m_b(b), m_per(per) {}
   size_t rows() const override { return m_b.desc().abrdf_size(); }
@@ -69,7 +69,7 @@ class MemorySource final : public fmf::ChunkSource {
 using test::run_group;
 
 // ||B - U SxV^T||_F / ||B||_F.
-inline double actual_error(const Btf& b, const fmf::SvdResult& r) {
+inline double actual_error(const Btf& b, const SvdResult& r) {
   const size_t m = b.desc().abrdf_size(), n = b.desc().num_texels();
   Eigen::Map<const Eigen::MatrixXf> B(b.data(), Eigen::Index(m), Eigen::Index(n));
   Eigen::MatrixXd R = B.cast<double>() - r.U.cast<double>() * r.SxV.cast<double>().transpose();

@@ -211,7 +211,7 @@ TEST(Quant, ContainerStoresZqTensorsAndRejectsDamagedFiles) {
 TEST(FmfQuant, StepsGiveEveryComponentTheSameError) {
   // U orthonormal-ish random columns, SxV columns of decaying strength.
   const int rows = 400, texels = 256, C = 4;
-  fmf::MatrixXfR U(rows, C), SxV(texels, C);
+  MatrixXfR U(rows, C), SxV(texels, C);
   std::vector<float> a = random_values(size_t(rows) * C, 1.0 / std::sqrt(double(rows)), 6);
   std::vector<float> b = random_values(size_t(texels) * C, 1.0, 7);
   for (int i = 0; i < rows * C; ++i) U.data()[i] = a[size_t(i)];

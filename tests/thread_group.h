@@ -1,4 +1,4 @@
-// Test helper: P "processes" as threads sharing an fmf::Collective (codecs/fmf/ooc_svd.h), for
+// Test helper: P "processes" as threads sharing an Collective (codecs/fmf/ooc_svd.h), for
 // the streamed SVD's multi-process tests without MPI.
 #pragma once
 #include <barrier>
@@ -9,7 +9,7 @@
 #include <thread>
 #include <vector>
 
-#include "codecs/fmf/ooc_svd.h"
+#include "core/chunks.h"
 
 namespace btfc::test {
 
@@ -17,7 +17,7 @@ namespace btfc::test {
 class ThreadGroup {
  public:
   explicit ThreadGroup(int p) : m_p(p), m_bar(p) {}
-  class Member final : public fmf::Collective {
+  class Member final : public Collective {
    public:
     Member(ThreadGroup& g, int r) : m_g(g), m_r(r) {}
     int rank() const override { return m_r; }

@@ -1,7 +1,7 @@
-// The offline tile-cache simulator (codecs/fmf/tile_cache.h).
+// The offline tile-cache simulator (formats/bsvtf/tile_cache.h).
 #include <gtest/gtest.h>
 
-#include "codecs/fmf/tile_cache.h"
+#include "formats/bsvtf/tile_cache.h"
 #include "tests/bsvtf_fixture.h"
 
 using namespace btfc;

@@ -12,7 +12,8 @@
 
 #include "codecs/fmf/fmf_cl.h"
 #include "codecs/fmf/fmf_quant.h"
-#include "codecs/fmf/svd.h"
+#include "codecs/fmf/ooc_fmf.h"
+#include "core/svd.h"
 #include "core/fixed_product.h"
 #include "core/cl_runtime.h"
 #include "core/interp.h"
@@ -21,7 +22,6 @@
 namespace btfc {
 namespace {
 
-using fmf::MatrixXfR;
 using Eigen::Index;
 
 constexpr uint32_t k_payload_version = 1;
@@ -411,7 +411,7 @@ void quantize(Block& b, bool half) {
 }
 
 // A factorized block from an SVD result, quantised; its statistics go to `stats`.
-Block block_from_svd(const std::string& name, fmf::SvdResult r, bool half, int max_rank, double target, ModelStats& stats) {
+Block block_from_svd(const std::string& name, SvdResult r, bool half, int max_rank, double target, ModelStats& stats) {
   Block b{name, std::move(r.U), std::move(r.SxV), r.S.cast<float>(), {}, {}};
   quantize(b, half);
   const int kept = int(b.U.cols());
@@ -437,6 +437,7 @@ class FmfCodec final : public Codec {
   std::vector<std::string> budget_variants() const override {
     return {"precision=half", "precision=q:bits=4", "precision=q:bits=5", "precision=q:bits=6", "precision=q:bits=8"};
   }
+  const StreamingEncoder* streaming() const override { return &fmf_streaming(); }
 
   Result<std::unique_ptr<Model>> encode(const Btf& btf, const Params& p, Context& ctx) const override {
     const BtfDesc& d = btf.desc();
@@ -444,14 +445,14 @@ class FmfCodec final : public Codec {
     if (cfg.dfmf && d.channels != 3) return invalid_argument("fmf: color=dfmf needs 3 channels, the BTF has " + std::to_string(d.channels));
     BTFC_RETURN_IF_ERROR(btf.check_finite("fmf input"));
     const auto t0 = std::chrono::steady_clock::now();
-    fmf::SvdOptions opt;
+    SvdOptions opt;
     opt.target_rel_error = p.get_real("target_error");
     opt.oversample = int(p.get_int("oversample"));
     opt.power_iters = int(p.get_int("power_iters"));
     opt.seed = ctx.seed;
     opt.progress = ctx.progress;
     const std::string m = p.get("svd");
-    opt.method = m == "exact" ? fmf::SvdMethod::exact : m == "randomized" ? fmf::SvdMethod::randomized : fmf::SvdMethod::automatic;
+    opt.method = m == "exact" ? SvdMethod::exact : m == "randomized" ? SvdMethod::randomized : SvdMethod::automatic;
     const int rank = int(p.get_int("rank")), chroma = int(p.get_int("chroma_rank"));
 
     std::vector<Block> blocks;
@@ -461,9 +462,9 @@ class FmfCodec final : public Codec {
     const bool dfmf_target = cfg.dfmf && opt.target_rel_error > 0;
     auto factor = [&](const std::string& name, const float* B, size_t rows, int max_rank) -> Status {
       opt.max_rank = max_rank;
-      fmf::SvdOptions o = opt;
+      SvdOptions o = opt;
       if (dfmf_target) o.target_rel_error = 0;
-      BTFC_ASSIGN_OR_RETURN(fmf::SvdResult r, fmf::truncated_svd(B, rows, d.num_texels(), o));
+      BTFC_ASSIGN_OR_RETURN(SvdResult r, truncated_svd(B, rows, d.num_texels(), o));
       blocks.push_back(block_from_svd(name, std::move(r), cfg.half, max_rank, o.target_rel_error, stats));
       return {};
     };
@@ -760,7 +761,7 @@ namespace {
 
 // The model of finished factorizations, one per block of the spec's colour mode, as encode()
 // makes it (quantisation, per-block rank / error statistics).
-Result<std::unique_ptr<Model>> model_from_svds(const BtfDesc& desc, const Params& p, std::vector<fmf::SvdResult> rs, ModelStats stats) {
+Result<std::unique_ptr<Model>> model_from_svds(const BtfDesc& desc, const Params& p, std::vector<SvdResult> rs, ModelStats stats) {
   const Config cfg = config_from(p);
   const size_t rows = cfg.dfmf ? desc.num_images() : desc.abrdf_size();
   if (rs.size() != (cfg.dfmf ? 3u : 1u)) return invalid_argument("fmf: " + std::to_string(rs.size()) + " factorizations for " + p.canonical());
@@ -769,7 +770,7 @@ Result<std::unique_ptr<Model>> model_from_svds(const BtfDesc& desc, const Params
   static const char* names[3] = {"y", "u", "v"};
   std::vector<Block> blocks;
   for (size_t k = 0; k < rs.size(); ++k) {
-    fmf::SvdResult& r = rs[k];
+    SvdResult& r = rs[k];
     if (size_t(r.U.rows()) != rows || size_t(r.SxV.rows()) != desc.num_texels() || r.U.cols() != r.SxV.cols())
       return invalid_argument("fmf: factor shapes disagree with the BTF (" + desc.summary() + ")");
     const int max_rank = k == 0 ? rank : (chroma ? chroma : rank);
@@ -782,17 +783,17 @@ Result<std::unique_ptr<Model>> model_from_svds(const BtfDesc& desc, const Params
 
 }  // namespace
 
-Result<std::unique_ptr<Model>> make_fmf_model_from_svd(const BtfDesc& desc, const Params& p, fmf::SvdResult r, ModelStats stats) {
+Result<std::unique_ptr<Model>> make_fmf_model_from_svd(const BtfDesc& desc, const Params& p, SvdResult r, ModelStats stats) {
   if (config_from(p).dfmf) return unsupported("fmf: make_fmf_model_from_svd builds color=rgb models only (color=dfmf: make_dfmf_model_from_svd)");
-  std::vector<fmf::SvdResult> rs;
+  std::vector<SvdResult> rs;
   rs.push_back(std::move(r));
   return model_from_svds(desc, p, std::move(rs), std::move(stats));
 }
 
-Result<std::unique_ptr<Model>> make_dfmf_model_from_svd(const BtfDesc& desc, const Params& p, fmf::SvdResult y, fmf::SvdResult u,
-                                                        fmf::SvdResult v, ModelStats stats) {
+Result<std::unique_ptr<Model>> make_dfmf_model_from_svd(const BtfDesc& desc, const Params& p, SvdResult y, SvdResult u,
+                                                        SvdResult v, ModelStats stats) {
   if (!config_from(p).dfmf) return unsupported("fmf: make_dfmf_model_from_svd builds color=dfmf models only");
-  std::vector<fmf::SvdResult> rs;
+  std::vector<SvdResult> rs;
   rs.push_back(std::move(y));
   rs.push_back(std::move(u));
   rs.push_back(std::move(v));

@@ -1,8 +1,9 @@
 // Codec `fmf`: full matrix factorization (truncated SVD) of the BTF matrix.
 //
-// Paper: Schwartz, Sarlette, Weinmann, Rump, Klein, "Design and Implementation of Practical
-// Bidirectional Texture Function Measurement Devices focusing on the Developments at the
-// University of Bonn" / the BSVTF paper (../shared/seeds/000_e242933b2e836b65.txt, section 4):
+// Paper: C. Schwartz, R. Ruiters, R. Klein, "Level-of-Detail Streaming and Rendering using
+// Bidirectional Sparse Virtual Texture Functions", Computer Graphics Forum 32(7), Pacific
+// Graphics 2013 (section 4, full matrix factorization; the BSVTF of its sections 5-7 is
+// formats/bsvtf/):
 // B = U Sigma V^T truncated after C columns, V := V Sigma, rho(x, wl, wv) ~ sum_c U_c(wl, wv) V_c(x),
 // arbitrary directions by Delaunay triangulation of each direction set in parabolic coordinates
 // with barycentric weights (9 lookups).
@@ -50,10 +51,16 @@
 #include <vector>
 
 #include "codecs/codec.h"
+#include "codecs/gpu_export.h"
 
 namespace btfc {
 
 const Codec& fmf_codec();
+// Its GPU exporter (codecs/gpu_export.h), defined in fmf_export.cpp.
+namespace gpu {
+struct Exporter;
+extern const Exporter k_fmf_exporter;
+}  // namespace gpu
 
 // ---- Bonn DFMF / FMF files as fmf models (formats/bonn/bonn_btf.h, formats.md 2.2) ----
 //
@@ -102,12 +109,12 @@ Result<FmfFactorsView> fmf_factors(const Model& model);
 // An fmf model (color=rgb) from a finished factorization of the BTF matrix, as encode() makes it
 // (quantisation to the spec's precision, rank / error statistics); for the out-of-core path
 // (codecs/fmf/ooc_fmf.h), whose SVD streams. `r.SxV` must hold all texels.
-namespace fmf { struct SvdResult; }
-Result<std::unique_ptr<Model>> make_fmf_model_from_svd(const BtfDesc& desc, const Params& params, fmf::SvdResult r, ModelStats stats);
+struct SvdResult;
+Result<std::unique_ptr<Model>> make_fmf_model_from_svd(const BtfDesc& desc, const Params& params, SvdResult r, ModelStats stats);
 // The same for color=dfmf from the factorizations of the three channel matrices (rows =
 // num_images, see dfmf_channel): y with at most `rank`, u and v with `chroma_rank` (or rank).
-Result<std::unique_ptr<Model>> make_dfmf_model_from_svd(const BtfDesc& desc, const Params& params, fmf::SvdResult y, fmf::SvdResult u,
-                                                        fmf::SvdResult v, ModelStats stats);
+Result<std::unique_ptr<Model>> make_dfmf_model_from_svd(const BtfDesc& desc, const Params& params, SvdResult y, SvdResult u,
+                                                        SvdResult v, ModelStats stats);
 
 // color=dfmf's colour transform of one texel: from its ABRDF `abrdf` (rows = num_images RGB
 // triples, the Btf layout) writes channel k (0: Y' = log(Y + e), 1: U' = U / (Y + e),
@@ -123,5 +130,16 @@ void dfmf_luminance_moments(const float* abrdf, size_t rows, double* sum_y, doub
 double dfmf_auto_offset(double sum_y, double sum_y2);
 // `p` (a color=dfmf fmf spec) with offset = `offset`: the spec a model of that offset carries.
 Result<Params> dfmf_with_offset(const Params& p, double offset);
+
+namespace gpu {
+
+// The fmf model restricted to what `opt.scene` needs, as the KTX2 export keeps it: eigen-textures
+// box-filtered to the finest mip level the scene samples, the kept components, and the measured
+// directions inside the (widened) cones. Without a scene (or a scene that keeps everything) it
+// is the model itself. model.bsvtf of a scene export is built from it, so the streaming file
+// holds only the scene's tiles, levels and packets.
+Result<std::unique_ptr<Model>> fmf_scene_model(const Model& fmf_model, const ExportOptions& opt);
+
+}  // namespace gpu
 
 }  // namespace btfc

@@ -13,10 +13,9 @@
 #include <algorithm>
 #include <cmath>
 
-#include "codecs/fmf/fmf_export.h"
 
 #include "codecs/fmf/fmf.h"
-#include "formats/gpu/export.h"
+#include "codecs/gpu_export.h"
 
 namespace btfc::gpu {
 namespace {
@@ -139,7 +138,7 @@ uint64_t bytes_for(int K, int KA, const BtfDesc& d, int m0, int m1, size_t nl, s
   return (tex * uint64_t(K) + uint64_t(nl) * nv * uint64_t(KA)) * 4 * uint64_t(bpc) + uint64_t(dir_n) * uint64_t(dir_n) * 2 * (8 + 16);
 }
 
-// What the scene needs (formats/gpu/scene.h): mip levels, directions, components.
+// What the scene needs (core/scene.h): mip levels, directions, components.
 struct SceneCut {
   int m0 = 0, m1 = 0;
   std::vector<int> ls, vs;
@@ -354,7 +353,6 @@ Result<std::unique_ptr<Model>> fmf_scene_model(const Model& model, const ExportO
   return make_fmf_model(sd, fv.bonn_color_model, std::move(blocks), fv.color_mean, fv.color_transform, fv.half);
 }
 
-extern const Exporter k_fmf_exporter;
 const Exporter k_fmf_exporter = {"fmf", &build, &emulate};
 
 }  // namespace btfc::gpu

@@ -14,14 +14,14 @@
 // the data's scale. A step is never below max|column| / 2^29 (integers stay in range).
 //
 // textures=dct: each SxV column (an image of width x height texels) is coded as its orthonormal
-// 8 x 8 DCT (the BSVTF tile transform, codecs/fmf/dct.h) with the same step D: the transform is
+// 8 x 8 DCT (the BSVTF tile transform, core/dct.h) with the same step D: the transform is
 // orthonormal, so the error per step is unchanged, and smooth eigen-textures put their energy
 // in few coefficients.
 #pragma once
 #include <string>
 #include <vector>
 
-#include "codecs/fmf/svd.h"
+#include "core/svd.h"
 #include "core/container.h"
 
 namespace btfc::fmf {

@@ -5,7 +5,7 @@
 
 namespace btfc {
 
-DfmfChannelSource::DfmfChannelSource(const fmf::ChunkSource& base, int k, float offset)
+DfmfChannelSource::DfmfChannelSource(const ChunkSource& base, int k, float offset)
     : m_base(base), m_k(k), m_offset(offset), m_clamped(new std::atomic<uint64_t>[base.num_chunks()]) {
   for (size_t c = 0; c < base.num_chunks(); ++c) m_clamped[c] = 0;
 }
@@ -47,7 +47,7 @@ Status DfmfChannelSource::load(size_t c, void* raw, float* dst) const {
   return transform(c, scratch, dst);
 }
 
-Status DfmfChannelSource::luminance_moments(const fmf::ChunkSource& base, const std::vector<size_t>& chunks, fmf::Collective& coll,
+Status DfmfChannelSource::luminance_moments(const ChunkSource& base, const std::vector<size_t>& chunks, Collective& coll,
                                             double* sum_y, double* sum_y2) {
   const size_t in_rows = base.rows();
   double sums[2] = {0, 0};

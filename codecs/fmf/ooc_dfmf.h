@@ -21,11 +21,11 @@
 
 namespace btfc {
 
-class DfmfChannelSource final : public fmf::ChunkSource {
+class DfmfChannelSource final : public ChunkSource {
  public:
   // Channel k (0: Y', 1: U', 2: V') of `base` with luminance offset `offset` (fmf.h), whose
   // rows must be a multiple of 3.
-  DfmfChannelSource(const fmf::ChunkSource& base, int k, float offset);
+  DfmfChannelSource(const ChunkSource& base, int k, float offset);
   size_t rows() const override { return m_base.rows() / 3; }
   size_t num_chunks() const override { return m_base.num_chunks(); }
   size_t chunk_first(size_t c) const override { return m_base.chunk_first(c); }
@@ -39,7 +39,7 @@ class DfmfChannelSource final : public fmf::ChunkSource {
   size_t raw_buffer_bytes(size_t c) const override;
   // The base's whole-file check (a raw .btfc's CRC), after the first pass of every channel's SVD
   // (the base's check is idempotent: the same answer each time).
-  Status finish_first_pass(fmf::Collective& coll) const override { return m_base.finish_first_pass(coll); }
+  Status finish_first_pass(Collective& coll) const override { return m_base.finish_first_pass(coll); }
 
   // Luminance values clamped to 0 over the chunks loaded so far, each chunk counted once however
   // often it was loaded (channel 0 only counts; the other channels clamp the same values).
@@ -47,14 +47,14 @@ class DfmfChannelSource final : public fmf::ChunkSource {
 
   // The automatic offset's sums (dfmf_luminance_moments, fmf.h) over `chunks` of `base`, summed
   // over the processes of `coll`: one extra pass before the factorizations (offset=0 only).
-  static Status luminance_moments(const fmf::ChunkSource& base, const std::vector<size_t>& chunks, fmf::Collective& coll,
+  static Status luminance_moments(const ChunkSource& base, const std::vector<size_t>& chunks, Collective& coll,
                                   double* sum_y, double* sum_y2);
 
  private:
   Status transform(size_t c, const float* base_chunk, float* dst) const;
   static size_t scratch_bytes(size_t values);
 
-  const fmf::ChunkSource& m_base;
+  const ChunkSource& m_base;
   int m_k;
   float m_offset;
   std::unique_ptr<std::atomic<uint64_t>[]> m_clamped;  // per chunk; set (not added) by every load

@@ -12,7 +12,7 @@ namespace btfc {
 namespace {
 
 // Adds one factorization's measurements to the encode's.
-void add_stats(fmf::StreamStats& sum, fmf::StreamStats one) {
+void add_stats(StreamStats& sum, StreamStats one) {
   sum.passes += one.passes;
   sum.bytes_read += one.bytes_read;
   sum.pass_seconds.insert(sum.pass_seconds.end(), one.pass_seconds.begin(), one.pass_seconds.end());
@@ -62,46 +62,53 @@ Result<StreamPlan> plan_streamed_fmf(const Params& p, const BtfDesc& desc, size_
   return plan;
 }
 
-uint32_t stream_lines_per_chunk(const BtfDesc& desc, const StreamPlan& plan, size_t max_bytes) {
-  const uint64_t m = desc.abrdf_size();  // chunks are of the BTF matrix, whatever is factorized
-  if (plan.fixed_bytes >= max_bytes) return 0;
-  const uint64_t per_line = k_stream_bytes_per_value * m * uint64_t(desc.width);
-  uint64_t lines = (max_bytes - plan.fixed_bytes) / per_line;
-  const uint64_t cap = std::max<uint64_t>(1, (uint64_t(64) << 20) / (m * uint64_t(desc.width)));  // 64 M floats = 256 MiB
-  lines = std::min({lines, cap, uint64_t(desc.height)});
-  return uint32_t(lines);
+StreamSizing stream_sizing(const StreamPlan& plan) {
+  StreamSizing z;
+  z.passes = plan.passes, z.fixed_bytes = plan.fixed_bytes, z.bytes_per_value = k_stream_bytes_per_value, z.note = plan.note;
+  return z;
 }
 
-Result<StreamedEncode> encode_fmf_streamed(const BdiChunks& file, const BtfDesc& desc, const Params& p, Context& ctx,
-                                           fmf::Collective& coll) {
-  if (desc.abrdf_size() != file.desc().abrdf_size() || desc.num_texels() != file.desc().num_texels())
-    return invalid_argument(file.path() + ": working file shape (" + file.desc().summary() + ") differs from the BTF's (" + desc.summary() + ")");
-  BdiChunkSource src(file);
-  return encode_fmf_streamed(src, desc, p, ctx, coll);
+namespace {
+class FmfStreaming final : public StreamingEncoder {
+ public:
+  Result<StreamSizing> plan(const Params& p, const BtfDesc& desc, size_t max_bytes) const override {
+    BTFC_ASSIGN_OR_RETURN(StreamPlan plan, plan_streamed_fmf(p, desc, max_bytes));
+    return stream_sizing(plan);
+  }
+  Result<StreamedEncode> encode(const ChunkSource& src, const BtfDesc& desc, const Params& p, Context& ctx,
+                                Collective& coll) const override {
+    return encode_fmf_streamed(src, desc, p, ctx, coll);
+  }
+};
+}  // namespace
+
+const StreamingEncoder& fmf_streaming() {
+  static const FmfStreaming s;
+  return s;
 }
 
-Result<StreamedEncode> encode_fmf_streamed(const fmf::ChunkSource& src, const BtfDesc& desc, const Params& p, Context& ctx,
-                                           fmf::Collective& coll) {
+Result<StreamedEncode> encode_fmf_streamed(const ChunkSource& src, const BtfDesc& desc, const Params& p, Context& ctx,
+                                           Collective& coll) {
   BTFC_ASSIGN_OR_RETURN(StreamPlan plan, plan_streamed_fmf(p, desc, ctx.max_bytes));
   if (src.rows() != desc.abrdf_size() || src.texels() != desc.num_texels())
     return invalid_argument("fmf out of core: the chunk source's shape differs from the BTF's (" + desc.summary() + ")");
-  fmf::SvdOptions opt;
+  SvdOptions opt;
   opt.target_rel_error = p.get_real("target_error");
   opt.oversample = int(p.get_int("oversample"));
   opt.power_iters = int(p.get_int("power_iters"));
   opt.seed = ctx.seed;
   opt.progress = coll.rank() == 0 ? ctx.progress : nullptr;
   StreamedEncode out;
-  out.chunks = fmf::owned_chunks(src, coll.rank(), coll.size());
-  auto factor = [&](const fmf::ChunkSource& s, int max_rank) -> Result<fmf::SvdResult> {
+  out.chunks = owned_chunks(src, coll.rank(), coll.size());
+  auto factor = [&](const ChunkSource& s, int max_rank) -> Result<SvdResult> {
     opt.max_rank = max_rank;
-    fmf::StreamStats st;
+    StreamStats st;
     auto r = plan.exact ? fmf::streaming_exact_svd(s, out.chunks, opt, coll, &st) : fmf::streaming_svd(s, out.chunks, opt, coll, &st);
     add_stats(out.stats, std::move(st));
     return r;
   };
   const int rank = int(p.get_int("rank")), chroma = int(p.get_int("chroma_rank"));
-  std::vector<fmf::SvdResult> rs;
+  std::vector<SvdResult> rs;
   double clamped = 0;
   Params rp = p;  // dfmf: with the resolved offset (the model's spec)
   float offset = 0;
@@ -121,12 +128,12 @@ Result<StreamedEncode> encode_fmf_streamed(const fmf::ChunkSource& src, const Bt
       return unsupported("fmf: color=dfmf with target_error (the error of the decoded data) needs the BTF in memory; raise --max-memory or set rank");
   }
   if (!plan.dfmf) {
-    BTFC_ASSIGN_OR_RETURN(fmf::SvdResult r, factor(src, rank));
+    BTFC_ASSIGN_OR_RETURN(SvdResult r, factor(src, rank));
     rs.push_back(std::move(r));
   } else {
     for (int k = 0; k < 3; ++k) {
       const DfmfChannelSource channel(src, k, offset);
-      BTFC_ASSIGN_OR_RETURN(fmf::SvdResult r, factor(channel, k == 0 ? rank : (chroma ? chroma : rank)));
+      BTFC_ASSIGN_OR_RETURN(SvdResult r, factor(channel, k == 0 ? rank : (chroma ? chroma : rank)));
       rs.push_back(std::move(r));
       if (k == 0) clamped = double(channel.clamped());
     }

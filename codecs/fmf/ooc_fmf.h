@@ -1,5 +1,5 @@
-// The fmf codec out of core: factorizes a BTF read chunk by chunk (an uncompressed Bonn BDI
-// working file, formats/bonn/bdi_work.h, or any chunk source such as a raw .btfc read in place)
+// The fmf codec out of core: factorizes a BTF read chunk by chunk (any core/chunks.h source: an
+// uncompressed Bonn BDI working file, formats/bonn/bdi_work.h, or a raw .btfc read in place)
 // with the streamed SVDs (ooc_svd.h), on one process or, through a Collective, on many
 // (btfc-mpi). Used by `btfc compress --max-memory` when the BTF does not fit, and by btfc-mpi
 // always.
@@ -21,31 +21,10 @@
 #include <vector>
 
 #include "codecs/codec.h"
+#include "codecs/streaming.h"
 #include "codecs/fmf/ooc_svd.h"
-#include "formats/bonn/bdi_work.h"
 
 namespace btfc {
-
-// A BDI file as column chunks of the BTF matrix (rows = abrdf_size, one chunk per BDI chunk).
-class BdiChunkSource final : public fmf::ChunkSource {
- public:
-  explicit BdiChunkSource(const BdiChunks& f) : m_f(f) {}
-  size_t rows() const override { return m_f.desc().abrdf_size(); }
-  size_t num_chunks() const override { return m_f.num_chunks(); }
-  size_t chunk_first(size_t c) const override { return m_f.chunk_first(c); }
-  size_t chunk_count(size_t c) const override { return m_f.chunk_count(c); }
-  size_t raw_bytes(size_t c) const override { return m_f.chunk_bytes(c); }
-  Status read(size_t c, void* raw) const override { return m_f.read_raw(c, static_cast<uint16_t*>(raw)); }
-  Status decode(size_t c, const void* raw, float* dst) const override {
-    return m_f.decode(c, static_cast<const uint16_t*>(raw), dst);
-  }
-  // Mapped and decoded straight from the page cache: no raw half buffer.
-  Status load(size_t c, void*, float* dst) const override { return m_f.read_decoded(c, dst); }
-  size_t raw_buffer_bytes(size_t) const override { return 0; }
-
- private:
-  const BdiChunks& m_f;
-};
 
 // Bytes per value of a chunk of the BTF matrix the chunk buffers take: one raw half buffer + two
 // float blocks (10). dfmf takes no more: a float scratch of the base chunk + two channel blocks
@@ -66,25 +45,15 @@ struct StreamPlan {
 // Checks the spec streams within max_bytes (svd=exact whose Gram matrix does not fit is an
 // error naming the sizes) and resolves it.
 Result<StreamPlan> plan_streamed_fmf(const Params& params, const BtfDesc& desc, size_t max_bytes);
-// Scan lines per chunk so that the chunk buffers plus plan.fixed_bytes fit in max_bytes; 0 when
-// even one scan line does not fit. Capped at 256 MiB of float per chunk (bigger chunks gain
-// nothing and leave fewer chunks to overlap reading with).
-uint32_t stream_lines_per_chunk(const BtfDesc& desc, const StreamPlan& plan, size_t max_bytes);
+// The plan as the generic sizing (codecs/streaming.h).
+StreamSizing stream_sizing(const StreamPlan& plan);
+// fmf's Codec::streaming(): plan_streamed_fmf + encode_fmf_streamed.
+const StreamingEncoder& fmf_streaming();
 
-struct StreamedEncode {
-  std::unique_ptr<Model> model;  // process 0 only (null elsewhere)
-  fmf::StreamStats stats;        // summed over the factorizations (dfmf: 3); buffer_bytes: the largest
-  std::vector<size_t> chunks;    // the chunks this process read
-};
-
-// Factorizes `file`; `desc` is the BTF's description (the file's own, or the original input's,
-// whose direction vectors are exact). Each process reads its share of the chunks by
-// coll.rank(); the plan is made against ctx.max_bytes (per process).
-Result<StreamedEncode> encode_fmf_streamed(const BdiChunks& file, const BtfDesc& desc, const Params& params, Context& ctx,
-                                           fmf::Collective& coll);
-// The same from any chunk source of `desc`'s shape (e.g. a raw .btfc read in place,
-// formats/btf_stream.h).
-Result<StreamedEncode> encode_fmf_streamed(const fmf::ChunkSource& src, const BtfDesc& desc, const Params& params, Context& ctx,
-                                           fmf::Collective& coll);
+// Factorizes the chunk source `src` of `desc`'s shape (`desc` is the original input's, whose
+// direction vectors are exact). Each process reads its share of the chunks by coll.rank(); the
+// plan is made against ctx.max_bytes (per process).
+Result<StreamedEncode> encode_fmf_streamed(const ChunkSource& src, const BtfDesc& desc, const Params& params, Context& ctx,
+                                           Collective& coll);
 
 }  // namespace btfc

@@ -40,13 +40,6 @@ void gaussian_rows(uint64_t seed, size_t first, size_t count, Index l, MatrixXf&
 
 }  // namespace
 
-std::vector<size_t> owned_chunks(const ChunkSource& src, int rank, int size) {
-  const size_t n = src.num_chunks();
-  std::vector<size_t> out;
-  for (size_t c = n * size_t(rank) / size_t(size); c < n * size_t(rank + 1) / size_t(size); ++c) out.push_back(c);
-  return out;
-}
-
 Result<SvdResult> streaming_svd(const ChunkSource& src, const std::vector<size_t>& chunks, const SvdOptions& opt, Collective& coll,
                                 StreamStats* stats_out) {
   const size_t m = src.rows(), n = src.texels();

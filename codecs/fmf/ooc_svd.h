@@ -39,72 +39,12 @@
 #include <string>
 #include <vector>
 
-#include "codecs/fmf/svd.h"
+#include "codecs/streaming.h"
+#include "core/chunks.h"
+#include "core/svd.h"
 #include "core/status.h"
 
 namespace btfc::fmf {
-
-class Collective;
-
-// Column chunks of B. read() does the I/O (called from a helper thread, may run concurrently
-// with decode() of another chunk); decode() turns raw bytes into a column-major float block
-// (rows() x chunk_count(c)).
-class ChunkSource {
- public:
-  virtual ~ChunkSource() = default;
-  virtual size_t rows() const = 0;
-  virtual size_t num_chunks() const = 0;
-  virtual size_t chunk_first(size_t c) const = 0;  // first texel (column)
-  virtual size_t chunk_count(size_t c) const = 0;  // texels in chunk c
-  virtual size_t raw_bytes(size_t c) const = 0;    // bytes read() fetches
-  virtual Status read(size_t c, void* raw) const = 0;
-  virtual Status decode(size_t c, const void* raw, float* dst) const = 0;
-  // read() then decode() into dst; a source may do both at once without the raw buffer (then
-  // raw_buffer_bytes() is 0 and `raw` is null).
-  virtual Status load(size_t c, void* raw, float* dst) const {
-    Status s = read(c, raw);
-    return s.ok() ? decode(c, raw, dst) : s;
-  }
-  virtual size_t raw_buffer_bytes(size_t c) const { return raw_bytes(c); }
-  // Zero-copy alternative to read() + decode(): a source whose file holds chunk c as a float
-  // column block already may map it instead. When mappable(), streaming_svd allocates no chunk
-  // buffers; it calls map() on the helper thread (at most two chunks mapped at once) and
-  // unmap() once the chunk is multiplied. Both thread-safe.
-  virtual bool mappable() const { return false; }
-  virtual Result<const float*> map(size_t c) const { return unsupported("this chunk source cannot map chunks"); }
-  virtual void unmap(size_t c, const float* p) const {}
-  // Called by every process once the first pass has seen every chunk (each by its owner): a
-  // source whose integrity check spans the whole file (a raw .btfc's tensor CRC) combines the
-  // processes' parts here through `coll`, and every process returns the same status.
-  virtual Status finish_first_pass(Collective& coll) const { return {}; }
-  size_t texels() const { return num_chunks() ? chunk_first(num_chunks() - 1) + chunk_count(num_chunks() - 1) : 0; }
-};
-
-// Collective operations over the processes that share a factorization. The default is one
-// process: sums are the identity. The MPI one is mpi/mpi_collective.h (btfc-mpi).
-class Collective {
- public:
-  virtual ~Collective() = default;
-  virtual int rank() const { return 0; }
-  virtual int size() const { return 1; }
-  // In-place element-wise sum over processes, result on every process.
-  virtual Status allreduce_sum(double* data, size_t n) { return {}; }
-  // In-place sum into process 0 (the others' buffers are left unspecified).
-  virtual Status reduce_sum_to_root(float* data, size_t n) { return {}; }
-  // Called by every process with its local status: returns the failure of the lowest failing
-  // process (the same on all processes), or ok when none failed.
-  virtual Status agree(const Status& local) { return local; }
-};
-
-// Per-process measurements of one streaming SVD.
-struct StreamStats {
-  int passes = 0;
-  uint64_t bytes_read = 0;            // raw chunk bytes this process read
-  std::vector<double> pass_seconds;   // wall time of each pass (including its collective sum)
-  double reduce_seconds = 0;          // time inside allreduce_sum / reduce_sum_to_root
-  uint64_t reduce_bytes = 0;          // payload of the collective sums (per process)
-  uint64_t buffer_bytes = 0;          // chunk buffers allocated
-};
 
 // Factorizes B from `chunks` (the chunk indices this process owns; together the processes own
 // every chunk exactly once). Returns U (m x C) on every process and SxV (n x C, all texels) on
@@ -122,8 +62,5 @@ Result<SvdResult> streaming_exact_svd(const ChunkSource& src, const std::vector<
 // Bytes streaming_exact_svd holds for m rows besides the chunk buffers and SxV: the Gram matrix,
 // the eigen-solver's workspace and one double column block.
 uint64_t streaming_exact_bytes(uint64_t m);
-
-// The chunks process `rank` of `size` owns: a contiguous range, balanced by texel count.
-std::vector<size_t> owned_chunks(const ChunkSource& src, int rank, int size);
 
 }  // namespace btfc::fmf

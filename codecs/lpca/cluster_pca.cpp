@@ -7,7 +7,7 @@
 
 #include <Eigen/Dense>
 
-#include "codecs/fmf/svd.h"
+#include "core/svd.h"
 
 namespace btfc::lpca {
 namespace {
@@ -17,7 +17,6 @@ using MatF = Eigen::MatrixXf;
 using MatD = Eigen::MatrixXd;
 using MapF = Eigen::Map<MatF>;
 using MapCF = Eigen::Map<const MatF>;
-using fmf::top_eigenpairs;
 
 constexpr Index k_exact_svd_limit = 384;  // Gram side up to which the exact (Gram) PCA is used
 constexpr Index k_block = 64;             // members per streamed block (5 MB of Bonn-size ABRDFs)

@@ -9,7 +9,7 @@
 
 #include "codecs/lpca/clustering.h"
 #include "codecs/lpca/lpca_model.h"
-#include "codecs/lpca/sh.h"
+#include "core/sh.h"
 #include "core/blas_env.h"
 
 namespace btfc {

@@ -2,7 +2,7 @@
 // the eigen-BRDFs, environment relighting and precomputed radiance transfer (PRT).
 //
 // Paper: G. Müller, J. Meseth, R. Klein, "Fast Environmental Lighting for Local-PCA Encoded BTFs",
-// Computer Graphics International 2004 (../shared/seeds/002_6a33619886f749f2.txt, sections 3-5;
+// Computer Graphics International 2004 (sections 3-5;
 // the seed text carries no title line, the attribution follows its abstract and content):
 //   B_x ~ mean_k(x) + sum_{i=1..c_B} <B_x - mean_k(x), E_{i,k(x)}> E_{i,k(x)}   (section 3)
 // with k(x) the texel's cluster (clustering.h: k-means++ seeding, then {PCA per cluster,
@@ -34,25 +34,16 @@
 #include <vector>
 
 #include "codecs/codec.h"
-#include "codecs/lpca/sh.h"
+#include "core/sh.h"
 
 namespace btfc {
 
 const Codec& lpca_codec();
-
-// SH expansion of an RGB lighting environment: order n (bands 0..n-1), coefficients [3][n*n].
-struct EnvironmentSH {
-  int order = 0;
-  std::vector<double> coeffs;
-};
-
-// Projects a lat-long RGB float image (row-major, 3 floats per pixel, layout above) onto SH by
-// exact per-pixel solid angles. Errors: non-positive size, order outside [1, 16], NaN/Inf pixels.
-Result<EnvironmentSH> project_latlong(const float* rgb, int width, int height, int order);
-// Reads a lat-long EXR (R, G, B channels, or Y for all three) and projects it. Errors name the file.
-Result<EnvironmentSH> project_environment(const std::string& latlong_exr_path, int order);
-// The environment rotated by R (light arriving from d now arrives from R d).
-EnvironmentSH rotate_environment(const EnvironmentSH& env, const sh::Mat3& R);
+// Its GPU exporter (codecs/gpu_export.h), defined in lpca_export.cpp.
+namespace gpu {
+struct Exporter;
+extern const Exporter k_lpca_exporter;
+}  // namespace gpu
 
 struct RelightOptions {
   sh::Mat3 sample_to_world;  // the sample's frame in the world; identity = lying flat, z up
@@ -78,10 +69,5 @@ Result<std::vector<float>> relight(const Model& lpca_model, const EnvironmentSH&
 Result<std::vector<Tensor>> prt_tensors(const Model& lpca_model, const EnvironmentSH& env, const RelightOptions& opt = {});
 // Stores prt_tensors(env) in the model, so its gpu_tensors() include them (exporters).
 Status attach_environment(Model& lpca_model, const EnvironmentSH& env, const RelightOptions& opt = {});
-
-// Writes an RGB float image (row-major, 3 floats per pixel) as a float EXR, atomically
-// (temporary name + rename). Reads it back likewise (R, G, B or Y channels).
-Status write_rgb_exr(const std::string& path, int w, int h, const std::vector<float>& rgb);
-Result<std::vector<float>> read_rgb_exr(const std::string& path, int& w, int& h);
 
 }  // namespace btfc

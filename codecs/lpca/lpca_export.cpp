@@ -21,13 +21,14 @@
 //                  lambda = (2 stored - 1) prt_scale[m == 0 ? 0 : 1]; a 1-channel BTF is grey.
 //   dir_index / dir_weight   parabolic Delaunay maps for btf_eval.
 #include "codecs/lpca/lpca_export.h"
+#include "codecs/lpca/lpca.h"
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 
 #include "codecs/lpca/lpca_model.h"
-#include "codecs/lpca/sh.h"
+#include "core/sh.h"
 
 namespace btfc::gpu {
 namespace {
@@ -177,7 +178,7 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
   const BtfDesc& d = m->desc();
   if (d.channels > 3) return unsupported("export: lpca with " + std::to_string(d.channels) + " channels (the shader returns RGB: at most 3)");
   if (d.num_lights() > 65535 || d.num_views() > 65535) return unsupported("export: more than 65535 directions");
-  // A scene keeps only the measured directions inside its cones (formats/gpu/scene.h); the
+  // A scene keeps only the measured directions inside its cones (core/scene.h); the
   // textures then index the kept directions, "light_indices" / "view_indices" map them back.
   const std::vector<int> ls = directions_in_cone(d.lights, opt.scene ? opt.scene->light_cone : std::nullopt);
   const std::vector<int> vs = directions_in_cone(d.views, opt.scene ? opt.scene->view_cone : std::nullopt);
@@ -330,7 +331,6 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
 
 }  // namespace
 
-extern const Exporter k_lpca_exporter;
 const Exporter k_lpca_exporter = {"lpca", &build, &emulate};
 
 }  // namespace btfc::gpu

@@ -6,7 +6,7 @@
 // environment (eq. 3): sum_m beta_m lambda_m(wv), lambda bilinearly interpolated in the 16 x 16
 // parabolic view maps (as the paper's hardware filtering does, computed in float here).
 #pragma once
-#include "formats/gpu/export.h"
+#include "codecs/gpu_export.h"
 
 namespace btfc::gpu {
 

@@ -30,6 +30,7 @@ class LpcaModel final : public Model {
   void eval(int x, int y, int light, int view, float* out) const override;
   Status eval_dir(int x, int y, const Vec3& wl, const Vec3& wv, float* out) const override;
   Result<std::vector<Tensor>> gpu_tensors() const override;
+  Status attach_environment(const EnvironmentSH& env) override;  // relight.cpp
   Status save(ContainerWriter& w) const override;
   uint64_t payload_bytes() const override;
   ModelStats stats() const override { return m_stats; }

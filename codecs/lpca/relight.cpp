@@ -1,10 +1,6 @@
-// Environment relighting and PRT for lpca models (seed 002 sections 4-5); EXR adapters.
+// Environment relighting and PRT for lpca models (seed 002 sections 4-5). Environment maps are
+// read by formats/exr/envmap.h: this file sees only pixels.
 // See lpca.h for the frames, the lat-long layout and the PRT quantization.
-#include <ImfChannelList.h>
-#include <ImfFrameBuffer.h>
-#include <ImfHeader.h>
-#include <ImfInputFile.h>
-#include <ImfOutputFile.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -65,62 +61,6 @@ EnvironmentSH to_sample_frame(const EnvironmentSH& env_w, const RelightOptions& 
 }
 
 }  // namespace
-
-Result<EnvironmentSH> project_latlong(const float* rgb, int width, int height, int order) {
-  if (width <= 0 || height <= 0 || size_t(width) * size_t(height) > (size_t(1) << 28))
-    return invalid_argument("environment: bad lat-long size " + std::to_string(width) + "x" + std::to_string(height));
-  if (order < 1 || order > sh::k_max_order) return invalid_argument("environment: SH order " + std::to_string(order) + " outside [1, 16]");
-  const int n2 = sh::num_coeffs(order);
-  EnvironmentSH env;
-  env.order = order;
-  env.coeffs.assign(size_t(3) * size_t(n2), 0.0);
-  bool finite = true;
-#pragma omp parallel
-  {
-    std::vector<double> acc(env.coeffs.size(), 0.0), y(static_cast<size_t>(n2));
-#pragma omp for schedule(static) reduction(&& : finite)
-    for (int j = 0; j < height; ++j) {
-      // Exact solid angle of the pixel row's cells; the basis is taken at the cell centre.
-      const double dw = 2 * k_pi / width * (std::cos(k_pi * j / height) - std::cos(k_pi * (j + 1) / height));
-      const double th = k_pi * (j + 0.5) / height, st = std::sin(th), ct = std::cos(th);
-      for (int i = 0; i < width; ++i) {
-        const double ph = 2 * k_pi * (i + 0.5) / width;
-        const float* px = rgb + (size_t(j) * size_t(width) + size_t(i)) * 3;
-        if (!std::isfinite(px[0]) || !std::isfinite(px[1]) || !std::isfinite(px[2])) finite = false;
-        if (px[0] == 0 && px[1] == 0 && px[2] == 0) continue;
-        sh::eval_basis(order, st * std::cos(ph), st * std::sin(ph), ct, y.data());
-        for (int c = 0; c < 3; ++c) {
-          const double f = dw * px[c];
-          for (int k = 0; k < n2; ++k) acc[size_t(c) * size_t(n2) + size_t(k)] += f * y[size_t(k)];
-        }
-      }
-    }
-#pragma omp critical
-    for (size_t k = 0; k < acc.size(); ++k) env.coeffs[k] += acc[k];
-  }
-  if (!finite) return invalid_argument("environment: NaN or Inf pixel values");
-  return env;
-}
-
-Result<EnvironmentSH> project_environment(const std::string& path, int order) {
-  int w = 0, h = 0;
-  BTFC_ASSIGN_OR_RETURN(std::vector<float> rgb, read_rgb_exr(path, w, h));
-  auto env = project_latlong(rgb.data(), w, h, order);
-  if (!env.ok()) return env.status().with_context(path);
-  return env;
-}
-
-EnvironmentSH rotate_environment(const EnvironmentSH& env, const sh::Mat3& R) {
-  EnvironmentSH out;
-  out.order = env.order;
-  const size_t n2 = size_t(sh::num_coeffs(env.order));
-  for (int c = 0; c < 3; ++c) {
-    if (env.coeffs.size() < (size_t(c) + 1) * n2) break;
-    std::vector<double> r = sh::rotate(env.order, env.coeffs.data() + size_t(c) * n2, R);
-    out.coeffs.insert(out.coeffs.end(), r.begin(), r.end());
-  }
-  return out;
-}
 
 Result<std::vector<float>> relight(const Model& model, const EnvironmentSH& env, const Vec3& view_dir, int& w, int& h,
                                    const RelightOptions& opt) {
@@ -200,71 +140,14 @@ Result<std::vector<Tensor>> prt_tensors(const Model& model, const EnvironmentSH&
   return out;
 }
 
+Status LpcaModel::attach_environment(const EnvironmentSH& env) { return btfc::attach_environment(*this, env); }
+
 Status attach_environment(Model& model, const EnvironmentSH& env, const RelightOptions& opt) {
   auto* m = dynamic_cast<LpcaModel*>(&model);
   if (!m) return invalid_argument("attach_environment needs an lpca model, got '" + model.spec() + "'");
   BTFC_ASSIGN_OR_RETURN(std::vector<Tensor> t, prt_tensors(model, env, opt));
   m->set_prt(std::move(t));
   return {};
-}
-
-Status write_rgb_exr(const std::string& path, int w, int h, const std::vector<float>& rgb) {
-  if (w <= 0 || h <= 0 || rgb.size() != size_t(w) * size_t(h) * 3)
-    return invalid_argument(path + ": image " + std::to_string(w) + "x" + std::to_string(h) + " does not match " + std::to_string(rgb.size()) + " values");
-  const std::string tmp = path + ".tmp-" + std::to_string(::getpid());
-  try {
-    Imf::Header header(w, h);
-    for (const char* ch : {"R", "G", "B"}) header.channels().insert(ch, Imf::Channel(Imf::FLOAT));
-    Imf::OutputFile file(tmp.c_str(), header);
-    Imf::FrameBuffer fb;
-    char* base = reinterpret_cast<char*>(const_cast<float*>(rgb.data()));
-    const size_t xs = 3 * sizeof(float), ys = xs * size_t(w);
-    fb.insert("R", Imf::Slice(Imf::FLOAT, base, xs, ys));
-    fb.insert("G", Imf::Slice(Imf::FLOAT, base + sizeof(float), xs, ys));
-    fb.insert("B", Imf::Slice(Imf::FLOAT, base + 2 * sizeof(float), xs, ys));
-    file.setFrameBuffer(fb);
-    file.writePixels(h);
-  } catch (const std::exception& e) {
-    std::remove(tmp.c_str());
-    return io_error(path + ": " + e.what());
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    std::remove(tmp.c_str());
-    return io_error(path + ": cannot rename the temporary file into place");
-  }
-  return {};
-}
-
-Result<std::vector<float>> read_rgb_exr(const std::string& path, int& w, int& h) {
-  try {
-    Imf::InputFile file(path.c_str());
-    const Imath::Box2i dw = file.header().dataWindow();
-    const long long ww = (long long)dw.max.x - dw.min.x + 1, hh = (long long)dw.max.y - dw.min.y + 1;
-    if (ww <= 0 || hh <= 0 || ww * hh > (1LL << 28)) return corrupt_data(path + ": bad EXR data window");
-    const Imf::ChannelList& chans = file.header().channels();
-    const bool rgb = chans.findChannel("R") && chans.findChannel("G") && chans.findChannel("B");
-    if (!rgb && !chans.findChannel("Y")) return corrupt_data(path + ": EXR has neither R, G, B nor Y channels");
-    w = int(ww), h = int(hh);
-    std::vector<float> out(size_t(ww * hh) * 3, 0.f);
-    const size_t xs = 3 * sizeof(float), ys = xs * size_t(ww);
-    // OpenEXR addresses pixels by absolute coordinates: shift the base by the window origin.
-    char* base = reinterpret_cast<char*>(out.data()) - (ptrdiff_t(dw.min.x) * ptrdiff_t(xs) + ptrdiff_t(dw.min.y) * ptrdiff_t(ys));
-    Imf::FrameBuffer fb;
-    if (rgb) {
-      fb.insert("R", Imf::Slice(Imf::FLOAT, base, xs, ys));
-      fb.insert("G", Imf::Slice(Imf::FLOAT, base + sizeof(float), xs, ys));
-      fb.insert("B", Imf::Slice(Imf::FLOAT, base + 2 * sizeof(float), xs, ys));
-    } else {
-      fb.insert("Y", Imf::Slice(Imf::FLOAT, base, xs, ys));
-    }
-    file.setFrameBuffer(fb);
-    file.readPixels(dw.min.y, dw.max.y);
-    if (!rgb)
-      for (size_t i = 0; i < out.size(); i += 3) out[i + 1] = out[i + 2] = out[i];
-    return out;
-  } catch (const std::exception& e) {
-    return io_error(path + ": " + e.what());
-  }
 }
 
 }  // namespace btfc

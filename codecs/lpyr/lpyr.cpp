@@ -5,7 +5,7 @@
 #include <chrono>
 #include <cmath>
 
-#include "codecs/fmf/svd.h"
+#include "core/svd.h"
 #include "codecs/lpyr/lpyr_cl.h"
 #include "codecs/lpyr/lpyr_internal.h"
 
@@ -71,13 +71,13 @@ struct Encoder {
       for (Index t = 0; t < Index(n); ++t) M.col(t) -= mean;
     }
     const auto t_svd = std::chrono::steady_clock::now();
-    fmf::SvdOptions opt;
+    SvdOptions opt;
     opt.max_rank = comps;
     opt.seed = ctx.seed + uint64_t(97 * k + c);
     // The exact path eigen-decomposes a min(d, n)^2 Gram matrix (cubic): above 256 the
     // randomized range finder (near-optimal with 4 power iterations) is much faster.
-    if (std::min(d, n) > 256) opt.method = fmf::SvdMethod::randomized;
-    BTFC_ASSIGN_OR_RETURN(fmf::SvdResult r, fmf::truncated_svd(m, d, n, opt));
+    if (std::min(d, n) > 256) opt.method = SvdMethod::randomized;
+    BTFC_ASSIGN_OR_RETURN(SvdResult r, truncated_svd(m, d, n, opt));
     // The level's error relative to its own energy (the mean, when kept, is exact).
     const double resid = std::max(0.0, r.total_energy - r.kept_energy);
     stats.add(level_key(k, c, "rel_error"), total > 0 ? std::sqrt(resid / total) : 0.0);

@@ -2,8 +2,8 @@
 //
 // Paper: W.-C. Ma, S.-H. Chao, Y.-T. Tseng, Y.-Y. Chuang, C.-F. Chang, B.-Y. Chen, M. Ouhyoung,
 // "Level-of-detail representation of bidirectional texture functions for real-time rendering",
-// I3D 2005
-// (../shared/seeds/001_086d83e1c01d1abc.txt, sections 3.1-3.4; results 4.2).
+// ACM SIGGRAPH Symposium on Interactive 3D Graphics and Games (I3D) 2005 (sections 3.1-3.4;
+// results 4.2).
 //
 // Model (per colour channel c of YCbCr, level k = 0..lmax, texel p, direction row r = l + nL v):
 //   F_0 = the BTF image, F_{k+1} = down(box3 * F_k), L_k = F_k - up(F_{k+1})     (eqs. 2-3)
@@ -25,7 +25,7 @@
 //    texels as about twice the Y components; 64x64, y=8 -> lmax 4 as in the paper), capped where
 //    the level becomes 1x1. `levels=n` asks for lmax = n - 1 (clamped the same way; the clamp
 //    is noted in the stats).
-//  - PCA per level and channel: fmf's truncated SVD (codecs/fmf/svd.h) of the d x N_k matrix
+//  - PCA per level and channel: fmf's truncated SVD (core/svd.h) of the d x N_k matrix
 //    (d = nL nV directions, N_k texels): exact Gram eigen-decomposition on the small side when
 //    min(d, N_k) <= 256, else randomized range finder (GEMM passes; 16 oversampling columns,
 //    4 power iterations, seeded by Context::seed). Components: y for Y, c for Cb and Cr, clamped
@@ -77,5 +77,10 @@
 namespace btfc {
 
 const Codec& lpyr_codec();
+// Its GPU exporter (codecs/gpu_export.h), defined in lpyr_export.cpp.
+namespace gpu {
+struct Exporter;
+extern const Exporter k_lpyr_exporter;
+}  // namespace gpu
 
 }  // namespace btfc

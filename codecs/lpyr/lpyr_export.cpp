@@ -18,6 +18,7 @@
 // btf_eval interpolates the measured directions by Delaunay (9 lookups, = the model's eval_dir);
 // btf_eval_nearest_lod is the paper's own renderer (lpyr_export.h).
 #include "codecs/lpyr/lpyr_export.h"
+#include "codecs/lpyr/lpyr.h"
 
 #include <algorithm>
 #include <array>
@@ -334,7 +335,6 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
 
 }  // namespace
 
-extern const Exporter k_lpyr_exporter;
 const Exporter k_lpyr_exporter = {"lpyr", &build, &emulate};
 
 }  // namespace btfc::gpu

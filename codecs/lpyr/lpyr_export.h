@@ -13,7 +13,7 @@
 //        viewer distance d as that footprint)
 // lod is clamped to [0, lmax]; lod = k (integer) is the BTF filtered to pyramid level k.
 #pragma once
-#include "formats/gpu/export.h"
+#include "codecs/gpu_export.h"
 
 namespace btfc::gpu {
 

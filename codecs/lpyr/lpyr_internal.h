@@ -59,15 +59,21 @@ struct PhongFit {
   Phong p;
   double rms_residual = 0;  // sqrt(mean (mu - fit)^2)
   double rel_residual = 0;  // ||mu - fit|| / ||mu|| (0 for all-zero mu)
-  int iterations = 0;       // Ceres LM iterations (0 when no LM was needed)
-  std::string method;       // "lm", "constant" (fewer than 4 samples) or "zero"
+  int iterations = 0;       // LM iterations (0 when no LM was needed)
+  std::string method;       // "lm" (Ceres), "lm-projected" (btfc's own), "constant" (fewer than 4 samples) or "zero"
 };
+// The LM that refines the start: Ceres's (when btfc was built with it, BTFC_HAVE_CERES) or a
+// projected Levenberg-Marquardt of btfc's own (the fallback when Ceres is absent; both reach the
+// same minimum on the tests' data, tests/lpyr_test.cpp). `automatic`: Ceres when built with it.
+enum class PhongSolver { automatic, ceres, projected };
+bool have_ceres();
 // Fits mu[r], r = l + lights.size() * v, over every (light, view) pair. Levenberg-Marquardt
 // (Ceres) with kd, ks >= 0 and alpha in [1, 1000], on data divided by max |mu| (so HDR scales
 // from 1e-6 to 1e6 condition the same), started from the best of a grid over alpha solved by
 // bounded linear least squares. Never fails: all-zero data give all-zero coefficients, fewer
 // than 4 samples give the constant mean; a non-finite LM result falls back to the start.
-PhongFit fit_phong(const DirectionSet& lights, const DirectionSet& views, const double* mu);
+// `ceres` without Ceres in the build falls back to `projected` (method says which ran).
+PhongFit fit_phong(const DirectionSet& lights, const DirectionSet& views, const double* mu, PhongSolver solver = PhongSolver::automatic);
 
 // ---- model (lpyr_model.cpp) -----------------------------------------------------------------
 // One PCA block: a level's channel. Reconstruction of texel t, direction row r:

@@ -1,6 +1,9 @@
-// lpyr: Phong fit of the top-level Y mean (paper section 3.2, eq. 5) by Levenberg-Marquardt
-// (Ceres 2.1). Contract in lpyr_internal.h.
+// lpyr: Phong fit of the top-level Y mean (paper section 3.2, eq. 5) by Levenberg-Marquardt:
+// Ceres 2.1 when btfc is built with it, else a projected LM of our own (4 parameters, analytic
+// Jacobian; Ceres is an optional dependency). Contract in lpyr_internal.h.
+#ifdef BTFC_HAVE_CERES
 #include <ceres/ceres.h>
+#endif
 
 #include <Eigen/Dense>
 #include <algorithm>
@@ -27,6 +30,7 @@ Sample sample_of(const Vec3& l, const Vec3& v) {
   return {clamp01(l.z), std::log(std::max(nh, k_nh_floor))};
 }
 
+#ifdef BTFC_HAVE_CERES
 // One residual per (light, view) sample; x = (ka, kd, ks, alpha).
 struct Residual {
   Sample s;
@@ -37,6 +41,7 @@ struct Residual {
     return true;
   }
 };
+#endif
 
 double sse(const std::vector<Sample>& s, const std::vector<double>& y, const double* x) {
   double e = 0;
@@ -74,14 +79,63 @@ void linear_fit(const std::vector<Sample>& s, const std::vector<double>& y, doub
   }
 }
 
+void clamp_bounds(double* x) {
+  x[1] = std::max(x[1], 0.0), x[2] = std::max(x[2], 0.0), x[3] = std::clamp(x[3], k_alpha_min, k_alpha_max);
+}
+
+// Projected Levenberg-Marquardt (Marquardt's diagonal scaling, steps projected onto the bounds;
+// accepted only when they lower the sum of squares). Returns the iterations taken.
+int projected_lm(const std::vector<Sample>& s, const std::vector<double>& y, double* x) {
+  double lambda = 1e-3, e = sse(s, y, x);
+  int it = 0;
+  for (; it < 200; ++it) {
+    Eigen::Matrix4d JtJ = Eigen::Matrix4d::Zero();
+    Eigen::Vector4d Jtr = Eigen::Vector4d::Zero();
+    for (size_t i = 0; i < s.size(); ++i) {
+      const double ex = std::exp(x[3] * s[i].log_nh);
+      const double r = x[0] + x[1] * s[i].nl + x[2] * ex - y[i];
+      const Eigen::Vector4d J(1.0, s[i].nl, ex, x[2] * s[i].log_nh * ex);
+      JtJ += J * J.transpose();
+      Jtr += J * r;
+    }
+    bool accepted = false;
+    while (lambda < 1e16) {
+      Eigen::Matrix4d A = JtJ;
+      for (int k = 0; k < 4; ++k) A(k, k) += lambda * std::max(JtJ(k, k), 1e-12);
+      const Eigen::Vector4d step = A.ldlt().solve(-Jtr);
+      double cand[4] = {x[0] + step(0), x[1] + step(1), x[2] + step(2), x[3] + step(3)};
+      clamp_bounds(cand);
+      const double ec = sse(s, y, cand);
+      if (std::isfinite(ec) && ec < e) {
+        const double gain = e - ec;
+        std::copy(cand, cand + 4, x);
+        e = ec, lambda = std::max(lambda / 3, 1e-12), accepted = true;
+        if (gain <= 1e-14 * std::max(e, 1e-300)) return it + 1;
+        break;
+      }
+      lambda *= 4;
+    }
+    if (!accepted) break;  // no step lowers the error: a (bounded) minimum
+  }
+  return it;
+}
+
 }  // namespace
+
+bool have_ceres() {
+#ifdef BTFC_HAVE_CERES
+  return true;
+#else
+  return false;
+#endif
+}
 
 double phong_eval(const Phong& p, const Vec3& l, const Vec3& v) {
   const Sample s = sample_of(l, v);
   return double(p.ka) + double(p.kd) * s.nl + double(p.ks) * std::exp(double(p.alpha) * s.log_nh);
 }
 
-PhongFit fit_phong(const DirectionSet& lights, const DirectionSet& views, const double* mu) {
+PhongFit fit_phong(const DirectionSet& lights, const DirectionSet& views, const double* mu, PhongSolver solver) {
   const size_t nl = lights.size(), n = nl * views.size();
   PhongFit fit;
   double scale = 0, norm2 = 0;
@@ -126,26 +180,35 @@ PhongFit fit_phong(const DirectionSet& lights, const DirectionSet& views, const 
   double start[4];
   std::copy(x, x + 4, start);
 
-  ceres::Problem problem;
-  for (size_t r = 0; r < n; ++r)
-    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<Residual, 1, 4>(new Residual{s[r], y[r]}), nullptr, x);
-  problem.SetParameterLowerBound(x, 1, 0);
-  problem.SetParameterLowerBound(x, 2, 0);
-  problem.SetParameterLowerBound(x, 3, k_alpha_min);
-  problem.SetParameterUpperBound(x, 3, k_alpha_max);
-  ceres::Solver::Options opt;
-  opt.minimizer_type = ceres::TRUST_REGION;
-  opt.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
-  opt.linear_solver_type = ceres::DENSE_QR;
-  opt.max_num_iterations = 200;
-  opt.function_tolerance = 1e-12;
-  opt.parameter_tolerance = 1e-12;
-  opt.logging_type = ceres::SILENT;
-  opt.minimizer_progress_to_stdout = false;
-  ceres::Solver::Summary summary;
-  ceres::Solve(opt, &problem, &summary);
-  fit.iterations = int(summary.iterations.size());
-  fit.method = "lm";
+  const bool use_ceres = solver != PhongSolver::projected && have_ceres();
+  if (!use_ceres) {
+    fit.iterations = projected_lm(s, y, x);
+    fit.method = "lm-projected";
+  }
+#ifdef BTFC_HAVE_CERES
+  if (use_ceres) {
+    ceres::Problem problem;
+    for (size_t r = 0; r < n; ++r)
+      problem.AddResidualBlock(new ceres::AutoDiffCostFunction<Residual, 1, 4>(new Residual{s[r], y[r]}), nullptr, x);
+    problem.SetParameterLowerBound(x, 1, 0);
+    problem.SetParameterLowerBound(x, 2, 0);
+    problem.SetParameterLowerBound(x, 3, k_alpha_min);
+    problem.SetParameterUpperBound(x, 3, k_alpha_max);
+    ceres::Solver::Options opt;
+    opt.minimizer_type = ceres::TRUST_REGION;
+    opt.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
+    opt.linear_solver_type = ceres::DENSE_QR;
+    opt.max_num_iterations = 200;
+    opt.function_tolerance = 1e-12;
+    opt.parameter_tolerance = 1e-12;
+    opt.logging_type = ceres::SILENT;
+    opt.minimizer_progress_to_stdout = false;
+    ceres::Solver::Summary summary;
+    ceres::Solve(opt, &problem, &summary);
+    fit.iterations = int(summary.iterations.size());
+    fit.method = "lm";
+  }
+#endif
   const bool finite = std::isfinite(x[0]) && std::isfinite(x[1]) && std::isfinite(x[2]) && std::isfinite(x[3]);
   if (!finite || sse(s, y, x) > best) std::copy(start, start + 4, x);
   return finish(x[0], x[1], x[2], std::clamp(x[3], k_alpha_min, k_alpha_max));

@@ -3,8 +3,9 @@
 // Paper: seed 003, an extension of Havran, Filip and Myszkowski 2010, "Bidirectional texture
 // function compression based on multi-level vector quantization", with adaptive colour
 // decomposition schemes, Huffman coding of indices and an OpenCL SSIM search
-// (../shared/seeds/003_e32f71d5a4e2baa5.txt, sections 3, 4.1-4.3, 5). The MLVQ database layout
-// it mirrors is ../shared/spec/formats.md section 2.5 (PDF1D / PDF2D / PDF3D / PDF4D / PDF6D).
+// (Computer Graphics Forum 29(1), 2010; sections 3, 4.1-4.3, 5 of the extension). The MLVQ
+// database layout it mirrors is the btfc specification's formats chapter, section 2.5 (PDF1D /
+// PDF2D / PDF3D / PDF4D / PDF6D).
 //
 // Pipeline (mlvq_internal.h has the exact contracts):
 //  1. resample.cpp: every texel's ABRDF is resampled (9-lookup interpolation between measured
@@ -44,5 +45,10 @@
 namespace btfc {
 
 const Codec& mlvq_codec();
+// Its GPU exporter (codecs/gpu_export.h), defined in mlvq_export.cpp.
+namespace gpu {
+struct Exporter;
+extern const Exporter k_mlvq_exporter;
+}  // namespace gpu
 
 }  // namespace btfc

@@ -1,6 +1,7 @@
 // mlvq GPU export: the codebook hierarchy as textures (layout in codecs/mlvq/mlvq_export.h) plus
 // the manifest's "evaluation" object. The shader and its CPU emulation: mlvq_export_glsl.cpp.
 #include "codecs/mlvq/mlvq_export.h"
+#include "codecs/mlvq/mlvq.h"
 
 #include <algorithm>
 #include <cmath>
@@ -200,7 +201,6 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
 }  // namespace
 }  // namespace mlvq_export
 
-extern const Exporter k_mlvq_exporter;
 const Exporter k_mlvq_exporter = {"mlvq", &mlvq_export::build, &mlvq_export::emulate};
 
 }  // namespace btfc::gpu

@@ -18,7 +18,7 @@
 #pragma once
 #include <string>
 
-#include "formats/gpu/export.h"
+#include "codecs/gpu_export.h"
 
 namespace btfc::gpu::mlvq_export {
 

@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "core/btf.h"
+#include "core/chunks.h"
 #include "core/status.h"
 
 namespace btfc {
@@ -108,5 +109,26 @@ class BdiChunks {
 // to_floats returns false when a value is a half NaN or Inf (converted all the same).
 float floats_to_half(const float* src, size_t n, float inv_scale, uint16_t* dst);
 bool half_to_floats(const uint16_t* src, size_t n, float scale, float* dst);
+
+// A BDI file as column chunks of the BTF matrix (rows = abrdf_size, one chunk per BDI chunk).
+class BdiChunkSource final : public ChunkSource {
+ public:
+  explicit BdiChunkSource(const BdiChunks& f) : m_f(f) {}
+  size_t rows() const override { return m_f.desc().abrdf_size(); }
+  size_t num_chunks() const override { return m_f.num_chunks(); }
+  size_t chunk_first(size_t c) const override { return m_f.chunk_first(c); }
+  size_t chunk_count(size_t c) const override { return m_f.chunk_count(c); }
+  size_t raw_bytes(size_t c) const override { return m_f.chunk_bytes(c); }
+  Status read(size_t c, void* raw) const override { return m_f.read_raw(c, static_cast<uint16_t*>(raw)); }
+  Status decode(size_t c, const void* raw, float* dst) const override {
+    return m_f.decode(c, static_cast<const uint16_t*>(raw), dst);
+  }
+  // Mapped and decoded straight from the page cache: no raw half buffer.
+  Status load(size_t c, void*, float* dst) const override { return m_f.read_decoded(c, dst); }
+  size_t raw_buffer_bytes(size_t) const override { return 0; }
+
+ private:
+  const BdiChunks& m_f;
+};
 
 }  // namespace btfc

@@ -1,4 +1,4 @@
-// Bonn binary .btf files: DFMF, FMF, PVF and BDI (../shared/spec/formats.md section 2.2; the
+// Bonn binary .btf files: DFMF, FMF, PVF and BDI (btfc specification, formats chapter section 2.2; the
 // byte layouts are pinned in docs/FORMAT.md, "Bonn .btf files").
 //
 // Reading: every format opens *as a Model* (codecs/codec.h), so info / eval / decompress /

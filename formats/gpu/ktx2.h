@@ -22,7 +22,7 @@
 #include <vector>
 
 #include "core/status.h"
-#include "formats/gpu/gpu_texture.h"
+#include "core/gpu_texture.h"
 
 namespace btfc::gpu {
 

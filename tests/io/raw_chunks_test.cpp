@@ -33,9 +33,9 @@ Btf synth(int w, int h) {
 }
 
 // The same chunks through read() + decode(): what the mapped path replaces.
-class Copying final : public fmf::ChunkSource {
+class Copying final : public ChunkSource {
  public:
-  explicit Copying(const fmf::ChunkSource& s) : m_s(s) {}
+  explicit Copying(const ChunkSource& s) : m_s(s) {}
   size_t rows() const override { return m_s.rows(); }
   size_t num_chunks() const override { return m_s.num_chunks(); }
   size_t chunk_first(size_t c) const override { return m_s.chunk_first(c); }
@@ -43,10 +43,10 @@ class Copying final : public fmf::ChunkSource {
   size_t raw_bytes(size_t c) const override { return m_s.raw_bytes(c); }
   Status read(size_t c, void* raw) const override { return m_s.read(c, raw); }
   Status decode(size_t c, const void* raw, float* dst) const override { return m_s.decode(c, raw, dst); }
-  Status finish_first_pass(fmf::Collective& coll) const override { return m_s.finish_first_pass(coll); }
+  Status finish_first_pass(Collective& coll) const override { return m_s.finish_first_pass(coll); }
 
  private:
-  const fmf::ChunkSource& m_s;
+  const ChunkSource& m_s;
 };
 
 // Overwrites the first occurrence of `marker`'s bytes in the file with `value`'s.
@@ -60,9 +60,9 @@ void patch_float(const std::string& path, float marker, float value) {
   io.write(reinterpret_cast<const char*>(&value), 4);
 }
 
-fmf::SvdOptions options() {
-  fmf::SvdOptions opt;
-  opt.max_rank = 6, opt.oversample = 4, opt.power_iters = 1, opt.method = fmf::SvdMethod::randomized;
+SvdOptions options() {
+  SvdOptions opt;
+  opt.max_rank = 6, opt.oversample = 4, opt.power_iters = 1, opt.method = SvdMethod::randomized;
   return opt;
 }
 
@@ -74,7 +74,7 @@ TEST(RawChunks, MappedChunksHoldTheFileAndFactorizeAsTheCopies) {
   ASSERT_TRUE(write_btf(b, path).ok());
   auto src = open_raw_chunks(path, 2);  // 4 chunks of 2 scan lines, the last one short
   ASSERT_TRUE(src.ok()) << src.status().message();
-  const fmf::ChunkSource& s = *src.value();
+  const ChunkSource& s = *src.value();
   ASSERT_TRUE(s.mappable());
   ASSERT_EQ(s.num_chunks(), 4u);
   for (size_t c = 0; c < s.num_chunks(); ++c) {
@@ -83,14 +83,14 @@ TEST(RawChunks, MappedChunksHoldTheFileAndFactorizeAsTheCopies) {
     EXPECT_EQ(std::memcmp(*p, b.abrdf(s.chunk_first(c)), s.raw_bytes(c)), 0) << "chunk " << c;
     s.unmap(c, *p);
   }
-  fmf::Collective one;
-  auto mapped = fmf::streaming_svd(s, fmf::owned_chunks(s, 0, 1), options(), one);
+  Collective one;
+  auto mapped = fmf::streaming_svd(s, owned_chunks(s, 0, 1), options(), one);
   ASSERT_TRUE(mapped.ok()) << mapped.status().message();
   auto again = open_raw_chunks(path, 2);
   ASSERT_TRUE(again.ok());
   Copying copying(*again.value());
   ASSERT_FALSE(copying.mappable());
-  auto copied = fmf::streaming_svd(copying, fmf::owned_chunks(copying, 0, 1), options(), one);
+  auto copied = fmf::streaming_svd(copying, owned_chunks(copying, 0, 1), options(), one);
   ASSERT_TRUE(copied.ok()) << copied.status().message();
   EXPECT_EQ(mapped->U, copied->U);
   EXPECT_EQ(mapped->SxV, copied->SxV);
@@ -111,9 +111,9 @@ TEST(RawChunks, NaNAndFlippedBitAreErrorsWhetherMappedOrCopied) {
       auto src = open_raw_chunks(path, 2);
       ASSERT_TRUE(src.ok()) << src.status().message();
       Copying copying(*src.value());
-      const fmf::ChunkSource& s = map ? *src.value() : static_cast<const fmf::ChunkSource&>(copying);
-      fmf::Collective one;
-      auto r = fmf::streaming_svd(s, fmf::owned_chunks(s, 0, 1), options(), one);
+      const ChunkSource& s = map ? *src.value() : static_cast<const ChunkSource&>(copying);
+      Collective one;
+      auto r = fmf::streaming_svd(s, owned_chunks(s, 0, 1), options(), one);
       ASSERT_FALSE(r.ok()) << kind << (map ? " mapped" : " copied");
       EXPECT_EQ(r.status().code(), StatusCode::corrupt_data);
       const std::string want = std::string(kind) == "nan" ? "non-finite value at texel (3, 6)" : "CRC mismatch";
@@ -133,14 +133,14 @@ TEST(RawChunks, ProcessesMappingTheirOwnChunksJoinTheCrc) {
   b.abrdf(3 * 10 + 4)[7] = marker;  // texel (4, 3): chunk 1 of 4, owned by the middle process
   const std::string path = tmp_path("mpi.btfc");
   ASSERT_TRUE(write_btf(b, path).ok());
-  auto run = [&](int P, std::vector<Result<fmf::SvdResult>>& out) {
-    test::run_group(P, [&](fmf::Collective& me, int r) {
+  auto run = [&](int P, std::vector<Result<SvdResult>>& out) {
+    test::run_group(P, [&](Collective& me, int r) {
       auto src = open_raw_chunks(path, 2);
       if (!src.ok()) return void(out[size_t(r)] = src.status());
-      out[size_t(r)] = fmf::streaming_svd(*src.value(), fmf::owned_chunks(*src.value(), r, P), options(), me);
+      out[size_t(r)] = fmf::streaming_svd(*src.value(), owned_chunks(*src.value(), r, P), options(), me);
     });
   };
-  std::vector<Result<fmf::SvdResult>> one(1, invalid_argument("not run")), three(3, invalid_argument("not run"));
+  std::vector<Result<SvdResult>> one(1, invalid_argument("not run")), three(3, invalid_argument("not run"));
   run(1, one);
   run(3, three);
   ASSERT_TRUE(one[0].ok()) << one[0].status().message();

@@ -1,5 +1,5 @@
 // Real spherical harmonics; see sh.h for the conventions.
-#include "codecs/lpca/sh.h"
+#include "core/sh.h"
 
 #include <Eigen/Dense>
 #include <algorithm>
@@ -203,3 +203,58 @@ std::vector<double> rotate(int order, const double* coeffs, const Mat3& R) {
 }
 
 }  // namespace btfc::sh
+
+namespace btfc {
+namespace {
+constexpr double k_pi = 3.14159265358979323846;
+}  // namespace
+
+Result<EnvironmentSH> project_latlong(const float* rgb, int width, int height, int order) {
+  if (width <= 0 || height <= 0 || size_t(width) * size_t(height) > (size_t(1) << 28))
+    return invalid_argument("environment: bad lat-long size " + std::to_string(width) + "x" + std::to_string(height));
+  if (order < 1 || order > sh::k_max_order) return invalid_argument("environment: SH order " + std::to_string(order) + " outside [1, 16]");
+  const int n2 = sh::num_coeffs(order);
+  EnvironmentSH env;
+  env.order = order;
+  env.coeffs.assign(size_t(3) * size_t(n2), 0.0);
+  bool finite = true;
+#pragma omp parallel
+  {
+    std::vector<double> acc(env.coeffs.size(), 0.0), y(static_cast<size_t>(n2));
+#pragma omp for schedule(static) reduction(&& : finite)
+    for (int j = 0; j < height; ++j) {
+      // Exact solid angle of the pixel row's cells; the basis is taken at the cell centre.
+      const double dw = 2 * k_pi / width * (std::cos(k_pi * j / height) - std::cos(k_pi * (j + 1) / height));
+      const double th = k_pi * (j + 0.5) / height, st = std::sin(th), ct = std::cos(th);
+      for (int i = 0; i < width; ++i) {
+        const double ph = 2 * k_pi * (i + 0.5) / width;
+        const float* px = rgb + (size_t(j) * size_t(width) + size_t(i)) * 3;
+        if (!std::isfinite(px[0]) || !std::isfinite(px[1]) || !std::isfinite(px[2])) finite = false;
+        if (px[0] == 0 && px[1] == 0 && px[2] == 0) continue;
+        sh::eval_basis(order, st * std::cos(ph), st * std::sin(ph), ct, y.data());
+        for (int c = 0; c < 3; ++c) {
+          const double f = dw * px[c];
+          for (int k = 0; k < n2; ++k) acc[size_t(c) * size_t(n2) + size_t(k)] += f * y[size_t(k)];
+        }
+      }
+    }
+#pragma omp critical
+    for (size_t k = 0; k < acc.size(); ++k) env.coeffs[k] += acc[k];
+  }
+  if (!finite) return invalid_argument("environment: NaN or Inf pixel values");
+  return env;
+}
+
+EnvironmentSH rotate_environment(const EnvironmentSH& env, const sh::Mat3& R) {
+  EnvironmentSH out;
+  out.order = env.order;
+  const size_t n2 = size_t(sh::num_coeffs(env.order));
+  for (int c = 0; c < 3; ++c) {
+    if (env.coeffs.size() < (size_t(c) + 1) * n2) break;
+    std::vector<double> r = sh::rotate(env.order, env.coeffs.data() + size_t(c) * n2, R);
+    out.coeffs.insert(out.coeffs.end(), r.begin(), r.end());
+  }
+  return out;
+}
+
+}  // namespace btfc

@@ -2,7 +2,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "codecs/fmf/tile_cache.h"
+#include "formats/bsvtf/tile_cache.h"
 
 namespace btfc {
 namespace {

@@ -1,5 +1,5 @@
 // BSVTF tiles: geometry, pyramid, prediction, residual codec; see bsvtf_tile.h.
-#include "codecs/fmf/bsvtf_tile.h"
+#include "formats/bsvtf/bsvtf_tile.h"
 
 #include <zlib.h>
 
@@ -7,7 +7,7 @@
 #include <cmath>
 #include <string>
 
-#include "codecs/fmf/dct.h"
+#include "core/dct.h"
 
 namespace btfc::bsvtf {
 
@@ -144,7 +144,7 @@ std::vector<uint8_t> encode_residual(const Geometry& g, const float* residual, c
   for (int k = 0; k < g.comps; ++k)
     for (int b = 0; b < blocks; ++b) {
       const size_t off = (size_t(k) * d + size_t(b / nb) * 8) * d + size_t(b % nb) * 8;
-      fdct8x8(residual + off, d, coef);
+      dct::fdct8x8(residual + off, d, coef);
       int32_t* qb = &q[(size_t(k) * blocks + size_t(b)) * 64];
       for (int i = 0; i < 64; ++i) {
         // Clamped so that absurd inputs cannot overflow int32 (a clamp only matters for data
@@ -153,13 +153,13 @@ std::vector<uint8_t> encode_residual(const Geometry& g, const float* residual, c
         qb[i] = int32_t(r);
         coef[i] = double(qb[i]) * double(steps[i]);
       }
-      idct8x8(coef, decoded + off, d);
+      dct::idct8x8(coef, decoded + off, d);
     }
   std::vector<uint8_t> raw;
   raw.reserve(q.size());
   for (int k = 0; k < g.comps; ++k)
     for (int z = 0; z < 64; ++z)
-      for (int b = 0; b < blocks; ++b) put_varint(raw, q[(size_t(k) * blocks + size_t(b)) * 64 + k_zigzag[size_t(z)]]);
+      for (int b = 0; b < blocks; ++b) put_varint(raw, q[(size_t(k) * blocks + size_t(b)) * 64 + dct::k_zigzag[size_t(z)]]);
   return raw;
 }
 
@@ -178,7 +178,7 @@ Status decode_residual(const Geometry& g, const uint8_t* raw, size_t n, const fl
           v |= uint32_t(c & 0x7F) << shift;
           if (!(c & 0x80)) break;
         }
-        q[(size_t(k) * blocks + size_t(b)) * 64 + k_zigzag[size_t(z)]] = int32_t((v >> 1) ^ (0u - (v & 1)));
+        q[(size_t(k) * blocks + size_t(b)) * 64 + dct::k_zigzag[size_t(z)]] = int32_t((v >> 1) ^ (0u - (v & 1)));
       }
   if (pos != n) return corrupt_data("tile payload has " + std::to_string(n - pos) + " bytes after its coefficients");
   double coef[64];
@@ -186,7 +186,7 @@ Status decode_residual(const Geometry& g, const uint8_t* raw, size_t n, const fl
     for (int b = 0; b < blocks; ++b) {
       const int32_t* qb = &q[(size_t(k) * blocks + size_t(b)) * 64];
       for (int i = 0; i < 64; ++i) coef[i] = double(qb[i]) * double(steps[i]);
-      idct8x8(coef, residual + (size_t(k) * d + size_t(b / nb) * 8) * d + size_t(b % nb) * 8, d);
+      dct::idct8x8(coef, residual + (size_t(k) * d + size_t(b / nb) * 8) * d + size_t(b % nb) * 8, d);
     }
   return {};
 }

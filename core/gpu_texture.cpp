@@ -1,4 +1,4 @@
-#include "formats/gpu/gpu_texture.h"
+#include "core/gpu_texture.h"
 
 #include <Imath/half.h>
 

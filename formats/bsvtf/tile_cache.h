@@ -51,7 +51,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "codecs/fmf/bsvtf.h"
+#include "formats/bsvtf/bsvtf.h"
 
 namespace btfc {
 

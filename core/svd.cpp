@@ -1,12 +1,12 @@
 // Truncated SVD for fmf; see svd.h for the contract and the choice of paths.
-#include "codecs/fmf/svd.h"
+#include "core/svd.h"
 
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 #include <random>
 
-namespace btfc::fmf {
+namespace btfc {
 
 using Eigen::Index;
 using Eigen::MatrixXd;
@@ -189,4 +189,4 @@ Result<SvdResult> truncated_svd(const float* B, size_t m, size_t n, const SvdOpt
   return method == SvdMethod::exact ? exact_svd(map, opt) : randomized_svd(map, opt);
 }
 
-}  // namespace btfc::fmf
+}  // namespace btfc

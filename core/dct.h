@@ -18,7 +18,7 @@
 #include <array>
 #include <cstdint>
 
-namespace btfc::bsvtf {
+namespace btfc::dct {
 
 // k_zigzag[z] = natural (row-major, row = vertical frequency) index of zigzag position z.
 extern const std::array<uint8_t, 64> k_zigzag;
@@ -36,4 +36,4 @@ void idct8x8(const double in[64], float* out, int stride);
 // above). Every step is > 0 for range > 0.
 std::array<float, 64> quant_steps(int quality, float range);
 
-}  // namespace btfc::bsvtf
+}  // namespace btfc::dct

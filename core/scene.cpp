@@ -1,4 +1,4 @@
-#include "formats/gpu/scene.h"
+#include "core/scene.h"
 
 #include <algorithm>
 #include <cmath>

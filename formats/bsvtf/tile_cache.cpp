@@ -1,6 +1,6 @@
 // The tile-cache simulator: cache operations (add / swap / evict by P = w v and the cost of
 // eq. 10), streaming accounting and the per-frame measurements; see tile_cache.h.
-#include "codecs/fmf/tile_cache.h"
+#include "formats/bsvtf/tile_cache.h"
 
 #include <algorithm>
 #include <cmath>

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "core/btf.h"
+#include "core/status.h"
 
 namespace btfc::sh {
 
@@ -66,3 +67,19 @@ std::vector<double> rotate(int order, const double* coeffs, const Mat3& R);
 double evaluate(int order, const double* coeffs, double x, double y, double z);
 
 }  // namespace btfc::sh
+
+namespace btfc {
+
+// SH expansion of an RGB lighting environment: order n (bands 0..n-1), coefficients [3][n*n].
+struct EnvironmentSH {
+  int order = 0;
+  std::vector<double> coeffs;
+};
+
+// Projects a lat-long RGB float image (row-major, 3 floats per pixel, layout above) onto SH by
+// exact per-pixel solid angles. Errors: non-positive size, order outside [1, 16], NaN/Inf pixels.
+Result<EnvironmentSH> project_latlong(const float* rgb, int width, int height, int order);
+// The environment rotated by R (light arriving from d now arrives from R d).
+EnvironmentSH rotate_environment(const EnvironmentSH& env, const sh::Mat3& R);
+
+}  // namespace btfc

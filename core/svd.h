@@ -1,4 +1,5 @@
-// Truncated SVD of a column-major float matrix B (m rows x n columns), for the fmf codec.
+// Truncated SVD of a column-major float matrix B (m rows x n columns): numerics shared by fmf,
+// lpyr and lpca (codecs do not include each other).
 //
 // Two paths:
 //  - exact: eigen-decomposition, in double, of the smaller Gram matrix (B B^T when m <= n, else
@@ -23,7 +24,7 @@
 #include "core/progress.h"
 #include "core/status.h"
 
-namespace btfc::fmf {
+namespace btfc {
 
 enum class SvdMethod { automatic, exact, randomized };
 
@@ -66,4 +67,4 @@ int choose_rank(const Eigen::VectorXd& lambda, double total, const SvdOptions& o
 // B is column-major with leading dimension m. Fails on m == 0 or n == 0.
 Result<SvdResult> truncated_svd(const float* B, size_t m, size_t n, const SvdOptions& opt);
 
-}  // namespace btfc::fmf
+}  // namespace btfc

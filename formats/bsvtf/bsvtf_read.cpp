@@ -11,7 +11,7 @@
 #include <cmath>
 #include <cstring>
 
-#include "codecs/fmf/bsvtf.h"
+#include "formats/bsvtf/bsvtf.h"
 
 namespace btfc {
 namespace {

@@ -10,8 +10,8 @@
 #include <cstdio>
 #include <cstring>
 
-#include "codecs/fmf/bsvtf.h"
-#include "codecs/fmf/dct.h"
+#include "formats/bsvtf/bsvtf.h"
+#include "core/dct.h"
 #include "codecs/fmf/fmf.h"
 
 namespace btfc {
@@ -197,7 +197,7 @@ Status write_bsvtf(const Model& model, const BsvtfOptions& opt, const std::strin
     float range = *hi - *lo;
     if (!(range > 0)) range = std::max(std::abs(*hi), std::abs(*lo)) > 0 ? std::max(std::abs(*hi), std::abs(*lo)) : 1.0f;
     ranges.push_back(range);
-    steps.push_back(quant_steps(opt.quality, range));
+    steps.push_back(dct::quant_steps(opt.quality, range));
     for (int gi = 0; gi < (b.C + g.comps - 1) / g.comps; ++gi) textures.emplace_back(int(bi), gi);
   }
 

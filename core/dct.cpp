@@ -1,10 +1,10 @@
 // 8 x 8 DCT and JPEG-like quantisation steps; see dct.h.
-#include "codecs/fmf/dct.h"
+#include "core/dct.h"
 
 #include <algorithm>
 #include <cmath>
 
-namespace btfc::bsvtf {
+namespace btfc::dct {
 
 const std::array<uint8_t, 64> k_zigzag = {0,  1,  8,  16, 9,  2,  3,  10, 17, 24, 32, 25, 18, 11, 4,  5,
                                           12, 19, 26, 33, 40, 48, 41, 34, 27, 20, 13, 6,  7,  14, 21, 28,
@@ -75,4 +75,4 @@ std::array<float, 64> quant_steps(int quality, float range) {
   return s;
 }
 
-}  // namespace btfc::bsvtf
+}  // namespace btfc::dct

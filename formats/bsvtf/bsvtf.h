@@ -1,5 +1,6 @@
-// BSVTF: the level-of-detail streaming file of an `fmf` model (seed 000 "Bidirectional Sparse
-// Virtual Texture Functions", sections 3, 5, 6 and 7).
+// BSVTF: the level-of-detail streaming file of an `fmf` model. Paper: C. Schwartz, R. Ruiters,
+// R. Klein, "Level-of-Detail Streaming and Rendering using Bidirectional Sparse Virtual Texture
+// Functions", Computer Graphics Forum 32(7), Pacific Graphics 2013 (sections 3, 5, 6 and 7).
 //
 // What it holds. Every factorized block b of the fmf model (color=rgb: one block "rgb";
 // color=dfmf: "y", "u", "v") has eigen-ABRDFs U (rows x C) and eigen-textures SxV (texels x C).
@@ -59,7 +60,7 @@
 #include <vector>
 
 #include "codecs/codec.h"
-#include "codecs/fmf/bsvtf_tile.h"
+#include "formats/bsvtf/bsvtf_tile.h"
 
 namespace btfc {
 

@@ -1,0 +1,108 @@
+#!/usr/bin/env python3
+"""Fails on an #include that crosses btfc's layers the wrong way (docs/ARCHITECTURE.md).
+
+Usage: check_layers.py [SOURCE_DIR]      (ctest `layers`; exit 1 and one line per bad edge)
+
+Layers, lowest first; a file may include its own layer and the ones below:
+  core/             data model, numerics, containers, descriptions (no file format, no codec)
+  codecs/*.h|cpp    the codec framework (Codec, Model, registry, measure, render, GPU bundle)
+  codecs/<name>/    one codec: core/, the framework, kernels/ and its own folder only: never
+                    another codec, never formats/ (codecs know no file format)
+  formats/          readers, writers, exporters' file side; may include the codecs' public
+                    headers (codecs/*.h and codecs/<name>/<name>.h), not their internals
+  cli/, mpi/        the programs: anything below, not each other
+  bench/, tests/    anything
+The registry (codecs/registry.cpp) is the one framework file that includes codecs' main headers.
+"""
+import os
+import re
+import sys
+
+INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
+SOURCES = (".h", ".cpp", ".cl")
+
+
+def layer_of(path):
+    """(layer, detail) of a repository-relative path."""
+    parts = path.split("/")
+    top = parts[0]
+    if top == "codecs":
+        if len(parts) == 2:
+            return "framework", None
+        return "codec", parts[1]
+    return top, None
+
+
+def allowed(src, dst):
+    """None when src may include dst, else the rule it breaks."""
+    sl, scodec = layer_of(src)
+    dl, dcodec = layer_of(dst)
+    if dl not in ("core", "framework", "codec", "formats", "kernels", "cli", "mpi", "tests", "bench"):
+        return None  # generated files (build/) and system-like paths are not ours to rule
+    if sl in ("bench", "tests"):
+        return None
+    if sl == "core":
+        if dl in ("core", "kernels"):
+            return None
+        return "core/ includes only core/ (and kernels/ shared structs)"
+    if sl == "framework":
+        if dl in ("core", "framework", "kernels"):
+            return None
+        if dl == "codec" and src == "codecs/registry.cpp" and dst == f"codecs/{dcodec}/{dcodec}.h":
+            return None
+        return "the codec framework (codecs/*.h, *.cpp) includes core/ and itself; only codecs/registry.cpp names codecs"
+    if sl == "codec":
+        if dl in ("core", "framework", "kernels"):
+            return None
+        if dl == "codec" and dcodec == scodec:
+            return None
+        if dl == "codec":
+            return f"codec {scodec} includes codec {dcodec}: shared numerics belong in core/"
+        return f"codec {scodec} includes {dl}/: codecs know no file format (move the I/O to formats/)"
+    if sl == "formats":
+        if dl in ("core", "framework", "kernels", "formats"):
+            return None
+        if dl == "codec" and dst == f"codecs/{dcodec}/{dcodec}.h":
+            return None
+        if dl == "codec":
+            return f"formats/ includes codec {dcodec}'s internals ({dst}): only its main header codecs/{dcodec}/{dcodec}.h"
+        return f"formats/ includes {dl}/"
+    if sl == "cli":
+        return None if dl != "mpi" else "cli/ includes mpi/"
+    if sl == "mpi":
+        return None if dl != "cli" else "mpi/ includes cli/"
+    if sl == "kernels":
+        return None if dl == "kernels" else "kernels/ include only kernels/"
+    return None
+
+
+def main():
+    root = os.path.abspath(sys.argv[1] if len(sys.argv) > 1 else os.path.join(os.path.dirname(__file__), ".."))
+    bad = []
+    checked = 0
+    for top in ("core", "codecs", "formats", "cli", "mpi", "kernels"):
+        for dirpath, _, files in os.walk(os.path.join(root, top)):
+            for f in sorted(files):
+                if not f.endswith(SOURCES):
+                    continue
+                src = os.path.relpath(os.path.join(dirpath, f), root)
+                with open(os.path.join(root, src), encoding="utf-8") as fh:
+                    text = fh.read()
+                for m in INCLUDE.finditer(text):
+                    dst = m.group(1)
+                    if "/" not in dst:
+                        continue  # same-folder or generated includes
+                    checked += 1
+                    why = allowed(src, dst)
+                    if why:
+                        bad.append(f"{src}: #include \"{dst}\": {why}")
+                if "../shared/" in text:
+                    bad.append(f"{src}: refers to ../shared/ (outside the repository): cite the paper or document instead")
+    for b in bad:
+        print(b)
+    print(f"check_layers: {checked} includes checked, {len(bad)} forbidden", file=sys.stderr)
+    return 1 if bad else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
