@@ -48,13 +48,14 @@ check bonn-convert 0 "$BTFC" convert "$W/m.btf" -o "$W/m2.btfc"
 check bonn-convert-back 0 "$BTFC" convert "$W/m2.btfc" -o "$W/m3.btf"
 check bonn-same 0 "$BTFC" --json compare "$W/m.btf" "$W/m3.btf"
 python3 -c "import json,sys; m=json.load(open(sys.argv[1])); assert m['rmse'] == 0, m; print('ok   bonn-convert-exact')" "$W/out.txt" || fails=$((fails + 1))
-# mlvq: compress (all four colour schemes, smallest kept) -> info -> decompress -> compare, eval.
+# mlvq: compress (the grid layout, default scheme 4) -> info -> decompress -> compare, eval.
+# (rel_l2 < 0.5: the grid at the issue-22 defaults, noise=auto caps level 1 at 0.7 on synthetic data; measured 0.40)
 check mlvq-compress 0 "$BTFC" compress "$W/s.btfc" -c mlvq:phi=8:theta=4:alpha=7:beta=7 -o "$W/q.btfc"
 check mlvq-info 0 "$BTFC" info --verify "$W/q.btfc"
 expect_grep mlvq-info-huffman "huffman_gain" "$W/out.txt"
 check mlvq-decompress 0 "$BTFC" decompress "$W/q.btfc" -o "$W/qd.btfc"
 check mlvq-compare 0 "$BTFC" --json compare "$W/s.btfc" "$W/qd.btfc"
-python3 -c "import json,sys; m=json.load(open(sys.argv[1])); assert 0.01 < m['rel_l2'] < 0.4 and 0.3 < m['mean_ssim'] < 1, m; print('ok   mlvq-values', m['rel_l2'], m['mean_ssim'])" "$W/out.txt" || fails=$((fails + 1))
+python3 -c "import json,sys; m=json.load(open(sys.argv[1])); assert 0.01 < m['rel_l2'] < 0.5 and 0.3 < m['mean_ssim'] < 1, m; print('ok   mlvq-values', m['rel_l2'], m['mean_ssim'])" "$W/out.txt" || fails=$((fails + 1))
 check mlvq-eval-dir 0 "$BTFC" eval "$W/q.btfc" --texel 3,4 --wl 20,30 --wv 40,100
 check mlvq-export 0 "$BTFC" export "$W/q.btfc" --to "$W/qx"
 python3 -c "import json,os,sys; d=sys.argv[1]; m=json.load(open(d+'/manifest.json')); assert m['codec']=='mlvq' and m['evaluation']['grid']['nphi']==8, m['evaluation']; [os.stat(d+'/'+t['file']) for t in m['textures']]; assert open(d+'/btf.frag').read().startswith('#version 300 es'); print('ok   mlvq-export-files', len(m['textures']))" "$W/qx" || fails=$((fails + 1))

@@ -320,3 +320,38 @@ TEST(MlvqExport, LayoutAndShaderContract) {
 }
 
 }  // namespace
+
+// The measured layout (mlvq's default): nodes are measured pairs, so btf_eval_measured reads
+// one node, and btf_eval blends the 3 x 3 measured pairs of the Delaunay direction maps
+// (codecs/gpu_export.h) as the other codecs' exports do. Reference for directions: the model's
+// own measured values blended with the bundle's map weights (the maps sample the model's
+// interpolation at their cell centres, so that is what the shader can reproduce exactly).
+TEST(MlvqExportMeasured, EmulationEqualsModelAtMeasuredPairsAndMapBlendAtDirections) {
+  auto m = encode(synth(6, 5, 20, 3), "mlvq");
+  ASSERT_TRUE(m);
+  for (bool half : {false, true}) {
+    const ExportBundle b = bundle(*m, half);
+    EXPECT_EQ(b.evaluation.at("layout"), "measured");
+    ASSERT_TRUE(b.find("dir_index") && b.find("dir_weight"));
+    EXPECT_NE(b.glsl.find("mlvq_eval_dir"), std::string::npos);
+    EXPECT_NE(b.glsl.find("usampler2DArray u_dir_index"), std::string::npos);
+    const Err e = measured_error(*m, b, 3);
+    EXPECT_LE(e.max_rel, half ? k_half_rel : k_float_rel) << half;
+    const BtfDesc& d = m->desc();
+    std::mt19937 rng(9);
+    std::vector<float> ref, emu;
+    for (int i = 0; i < 300; ++i) {
+      const int x = i % d.width, y = (i / d.width) % d.height;
+      const Vec3 wl = random_dir(rng, 0.05f), wv = random_dir(rng, 0.05f);
+      float mv[3], ev[3];
+      emulate_delaunay(b, wl, wv, [&](int l, int v, float* rgb) { m->eval(x, y, l, v, rgb); }, mv);
+      ShaderQuery q;
+      q.u = uv_of(x, d.width), q.v = uv_of(y, d.height), q.wl = wl, q.wv = wv;
+      find_exporter("mlvq")->emulate(b, q, ev);
+      for (int c = 0; c < 3; ++c) ref.push_back(mv[c]), emu.push_back(ev[c]);
+    }
+    const Err f = error_of(ref, emu, 300);
+    EXPECT_LE(f.max_rel, half ? k_half_rel : k_float_rel) << half;
+    std::printf("measured layout %s: measured max rel %.3g, directions max rel %.3g\n", half ? "half" : "float", e.max_rel, f.max_rel);
+  }
+}

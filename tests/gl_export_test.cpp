@@ -9,7 +9,7 @@
 //     of the stored values (rgba16f: relative 2^-11 per stored value), so the bound is derived
 //     from that (see half_bound()).
 // Codecs are looped over by name; one without an exporter yet is skipped, so a new exporter
-// is tested here as soon as its line is in formats/gpu/export.cpp. The measured maxima are
+// is tested here as soon as its line is in codecs/registry.cpp. The measured maxima are
 // printed ("[gl] ...") and recorded as test properties.
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -155,7 +155,7 @@ class GlExport : public ::testing::TestWithParam<Case> {};
 TEST_P(GlExport, GpuMatchesEmulationAndModel) {
   const Case& c = GetParam();
   const gpu::Exporter* ex = gpu::find_exporter(c.codec);
-  if (!ex) GTEST_SKIP() << c.codec << " has no GPU exporter yet (formats/gpu/export.cpp)";
+  if (!ex) GTEST_SKIP() << c.codec << " has no GPU exporter yet (codecs/registry.cpp)";
   if (Status s = gltest::gl_context(); !s.ok()) GTEST_SKIP() << "no OpenGL ES here: " << s.message();
 
   const Btf& btf = synthetic(c.scale);

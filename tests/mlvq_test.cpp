@@ -223,9 +223,11 @@ TEST(MlvqExtremes, HdrFromOneMillionthToOneMillionUses16BitScales) {
     const float f = float(std::pow(10.0, -6.0 + 12.0 * double(t) / double(n - 1)));
     for (size_t r = 0; r < a; ++r) b.abrdf(t)[r] *= f;
   }
-  auto m = encode(b, k_small + ":scheme=2");
+  // noise=off: the image-domain noise estimate reads these 100x jumps between neighbours as noise
+  // (mlvq.h); this test is about the scales' range, at fixed thresholds.
+  auto m = encode(b, k_small + ":scheme=2:noise=off");
   ASSERT_TRUE(m);
-  EXPECT_EQ(hier(*m).scale_bits, 16);
+  EXPECT_EQ(hier(*m).scale_bits, 16);  // the texels' peaks span 1e12: auto picks the unclipped 16-bit codes
   const Btf d = decode_all(*m);
   // Per-texel relative L2 error: every texel keeps its magnitude (within the VQ error), from
   // 1e-6 to 1e6 alike.
@@ -494,4 +496,136 @@ TEST(MlvqOpenCL, BatchedDecodeKernelMatchesReferenceAndModel) {
       }
     }
   }
+}
+
+// ---- the measured layout (payload version 2) -----------------------------------------------------
+
+// Measured: rel_l2 0.374 (MSSIM 0.769, 372 : 1) for the default on synth(6, 6, 1, 7).
+constexpr double SYN_REL = 0.40;
+
+TEST(MlvqMeasured, LayoutCoversTheMeasuredPairsOnce) {
+  BtfDesc d;
+  d.width = d.height = 1, d.channels = 3, d.lights = DirectionSet::ubo2003(), d.views = DirectionSet::ubo2003();
+  const Grid g = measured_grid(d);
+  EXPECT_TRUE(g.measured());
+  EXPECT_EQ(g.nphi, 9);
+  EXPECT_EQ(g.ntheta, 9);
+  EXPECT_EQ(g.nalpha, 9);
+  EXPECT_EQ(g.nbeta, 9);
+  std::vector<int> seen(81 * 81, 0);
+  for (size_t node = 0; node < g.size(); ++node) {
+    uint32_t l, v;
+    node_measured(g, node, l, v);
+    seen[l + 81 * v]++;
+    const Stencil s = measured_stencil(g, d, l, v);
+    EXPECT_EQ(size_t(s.i[0][0]) + 9 * (size_t(s.i[1][0]) + 9 * (size_t(s.i[2][0]) + 9 * size_t(s.i[3][0]))), node);
+  }
+  for (int c : seen) EXPECT_EQ(c, 1);
+  // Sets that do not factor: groups overhang and the padding repeats the last direction.
+  d.lights.dirs.resize(13), d.views.dirs.resize(7);
+  const Grid h = measured_grid(d);
+  EXPECT_EQ(h.nbeta, 4);
+  EXPECT_EQ(h.nalpha, 4);
+  EXPECT_EQ(h.ntheta, 3);
+  EXPECT_EQ(h.nphi, 3);
+  uint32_t l, v;
+  node_measured(h, h.size() - 1, l, v);
+  EXPECT_EQ(l, 12u);
+  EXPECT_EQ(v, 6u);
+}
+
+TEST(MlvqMeasured, NoResamplingErrorAndEvalPathsAgree) {
+  const Btf b = synth(6, 6, 1, 7);
+  auto m = encode(b, "mlvq");
+  ASSERT_TRUE(m);
+  EXPECT_TRUE(hier(*m).grid.measured());
+  EXPECT_EQ(stat(*m, "layout_measured"), 1);
+  EXPECT_LE(stat(*m, "resample_rel_rmse"), 1e-6);
+  auto mt = compare_btf(b, decode_all(*m));
+  ASSERT_TRUE(mt.ok());
+  std::printf("measured default: rel_l2 %.4f mssim %.4f ratio %.1f\n", mt->rel_l2, mt->mean_ssim, stat(*m, "ratio_vs_f32"));
+  // Measured: rel_l2 see the bounds (two-sided, 0.75 x bound <= value <= bound).
+  EXPECT_LE(mt->rel_l2, SYN_REL);
+  EXPECT_GE(mt->rel_l2, 0.75 * SYN_REL);
+  const Btf d = decode_all(*m);
+  std::vector<EvalQuery> q;
+  for (int i = 0; i < 60; ++i) q.push_back({i % 6, (i / 6) % 6, (i * 7) % 81, (i * 13) % 81, {}, {}});
+  // Arbitrary directions: eval_batch blends the 3 x 3 measured pairs as eval_dir does.
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> th(0, 1.3), ph(0, 6.28);
+  for (int i = 0; i < 40; ++i) q.push_back({i % 6, (i / 5) % 6, -1, -1, dir_from_theta_phi(th(rng), ph(rng)), dir_from_theta_phi(th(rng), ph(rng))});
+  std::vector<float> out(3 * q.size());
+  ASSERT_TRUE(m->eval_batch(q, out.data()).ok());
+  for (size_t i = 0; i < q.size(); ++i) {
+    float e[3], ed[3];
+    if (q[i].light >= 0) {
+      m->eval(q[i].x, q[i].y, q[i].light, q[i].view, e);
+      ASSERT_TRUE(m->eval_dir(q[i].x, q[i].y, b.desc().lights.dirs[size_t(q[i].light)], b.desc().views.dirs[size_t(q[i].view)], ed).ok());
+      for (int c = 0; c < 3; ++c) {
+        const float want = d.at(size_t(q[i].x), size_t(q[i].y), size_t(q[i].light), size_t(q[i].view), size_t(c));
+        EXPECT_NEAR(e[c], want, 1e-5f * (1 + std::fabs(want)));
+        EXPECT_NEAR(ed[c], want, 1e-4f * (1 + std::fabs(want)));
+        EXPECT_NEAR(out[3 * i + size_t(c)], want, 1e-5f * (1 + std::fabs(want)));
+      }
+    } else {
+      ASSERT_TRUE(m->eval_dir(q[i].x, q[i].y, q[i].wl, q[i].wv, ed).ok());
+      for (int c = 0; c < 3; ++c) EXPECT_NEAR(out[3 * i + size_t(c)], ed[c], 1e-4f * (1 + std::fabs(ed[c])));
+    }
+  }
+}
+
+TEST(MlvqMeasured, SaveLoadIsExactWithQuantizedValuesAndScales) {
+  const Btf b = synth(5, 4, 30, 2);  // HDR: 10-bit scales
+  auto m = encode(b, "mlvq");
+  ASSERT_TRUE(m);
+  EXPECT_EQ(hier(*m).scale_bits, 10);
+  EXPECT_EQ(hier(*m).value_bits, 8);
+  const std::string path = ::testing::TempDir() + "mlvq_meas_" + std::to_string(::getpid()) + ".btfc";
+  ASSERT_TRUE(save_model(*m, mlvq_codec(), path).ok());
+  auto rd = ContainerReader::open(path);
+  ASSERT_TRUE(rd.ok()) << rd.status().message();
+  EXPECT_EQ(rd->codec().payload_version, 2u);
+  EXPECT_EQ(rd->find("lum1.values")->dtype, DType::zq);
+  auto lm = load_model(rd.value());
+  ASSERT_TRUE(lm.ok()) << lm.status().message();
+  EXPECT_TRUE(hier(*lm.value()).grid.measured());
+  EXPECT_EQ(hier(*lm.value()).value_bits, 8);
+  const Btf a = decode_all(*m), c = decode_all(*lm.value());
+  ASSERT_EQ(a.size(), c.size());
+  for (size_t i = 0; i < a.size(); ++i) ASSERT_EQ(a.data()[i], c.data()[i]);
+  EXPECT_EQ(lm.value()->payload_bytes(), m->payload_bytes());
+  // A layout word the reader does not know, and a measured layout that does not fit the BTF.
+  for (int what = 0; what < 2; ++what) {
+    ContainerWriter w;
+    w.set_desc(rd->desc());
+    w.set_codec(rd->codec());
+    for (const TensorInfo& ti : rd->tensors()) {
+      Tensor t = rd->read(ti.name).value();
+      if (ti.name == "mlvq") {
+        if (what == 0) t.bytes[28] = 7;
+        else t.bytes[4] = 5;  // nphi
+      }
+      w.add_tensor(std::move(t));
+    }
+    const std::string tp = path + ".bad";
+    ASSERT_TRUE(w.write(tp).ok());
+    auto r2 = ContainerReader::open(tp);
+    ASSERT_TRUE(r2.ok());
+    auto bad = load_model(r2.value());
+    EXPECT_FALSE(bad.ok()) << what;
+    if (!bad.ok()) EXPECT_NE(bad.status().message().find("layout"), std::string::npos) << bad.status().message();
+    std::remove(tp.c_str());
+  }
+  std::remove(path.c_str());
+}
+
+TEST(MlvqMeasured, RatioFloorRelaxesTheThresholds) {
+  const Btf b = synth(6, 6, 1, 4);
+  auto strict = encode(b, "mlvq:min_ratio=0:ssim4=0.99:ssim3=0.99:ssim2=0.99:ssim1=0.99:noise=off");
+  auto floored = encode(b, "mlvq:min_ratio=1e6:ssim4=0.99:ssim3=0.99:ssim2=0.99:ssim1=0.99:noise=off");
+  ASSERT_TRUE(strict && floored);
+  EXPECT_EQ(stat(*strict, "relaxed"), 0);
+  EXPECT_EQ(stat(*floored, "relaxed"), 4);  // 1e6 : 1 is out of reach: four relaxations, then stop
+  EXPECT_NEAR(stat(*floored, "threshold.lum1"), 1 - 0.01 * std::pow(1.6, 4), 1e-9);
+  EXPECT_LT(floored->payload_bytes(), strict->payload_bytes());
 }

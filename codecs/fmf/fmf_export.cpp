@@ -1,7 +1,7 @@
 // fmf GPU export: the renderer of seed 000 section 4 (eigen-ABRDFs x eigen-textures, Delaunay
 // direction interpolation in parabolic coordinates, 9 lookups).
 //
-// Textures (formats/gpu/export.h for the shader contract):
+// Textures (codecs/gpu_export.h for the shader contract):
 //   eigen_texture  2D array W x H, sum_b ceil(C_b / 4) layers, RGBA = components 4j..4j+3 of
 //                  block b's SxV (eigen-textures, V Sigma) / per-component scale; full mip chain (box filter:
 //                  a mip level of the eigen-textures is exactly the mip level of the BTF).

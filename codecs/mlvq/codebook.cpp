@@ -28,6 +28,12 @@ namespace btfc::mlvq {
 
 using MatrixXfR = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 
+float store_value(float v, int value_bits) {
+  if (value_bits <= 0) return float(Imath::half(v));
+  const float q = std::ldexp(1.f, value_bits);
+  return std::round(v * q) / q;
+}
+
 double ssim_from_moments(double n, double sx, double sxx, double se, double see, double sxe, double L, bool scaled,
                          double* scale) {
   double s = 1;
@@ -54,6 +60,10 @@ ScaleCodes quantize_scales(std::vector<float>& v, int bits) {
     // 8-bit LDR scales: a 1e4 dynamic range (3.7 % steps); smaller values are rounded up to the
     // bottom of the range (an error below 1e-4 of the stream's largest scale).
     if (bits <= 8) c.lo = std::max(c.lo, c.hi - float(std::log(1e4)));
+    // 10-bit scales (the HDR default): a 1e6 dynamic range (1.4 % steps, an RMS error of 0.4 %,
+    // far below what the SSIM thresholds accept); 12 bits: 1e9 (0.5 % steps).
+    else if (bits <= 10) c.lo = std::max(c.lo, c.hi - float(std::log(1e6)));
+    else if (bits <= 12) c.lo = std::max(c.lo, c.hi - float(std::log(1e9)));
   }
   const double q = double((1u << bits) - 1);
   for (size_t i = 0; i < v.size(); ++i) {
@@ -163,6 +173,14 @@ PassOut leader_pass(const Btf& btf, const ResamplePlan& plan, int level, Part pa
       }
     }
     // In order: zero vectors, matches, matches among this batch's new entries, new entries.
+    // The dot products with this batch's new entries (prototypes are batch rows) come from the
+    // batch's Gram matrices, one GEMM each: the sequential part is then O(B x new entries)
+    // SSIM evaluations instead of that many d-long dot products (on noisy data most vectors of
+    // a batch are new, and this loop was the encoder's bottleneck).
+    MatrixXfR Hl, Hc;
+    if (dl) Hl.noalias() = Xl * Xl.transpose();
+    if (dc) Hc.noalias() = Xc * Xc.transpose();
+    std::vector<uint32_t> row_of;  // batch row of each entry created in this batch (index j - K0)
     for (size_t i = 0; i < B; ++i) {
       const double* m = &xm[5 * i];
       const size_t ci = b0 + i;
@@ -177,20 +195,9 @@ PassOut leader_pass(const Btf& btf, const ResamplePlan& plan, int level, Part pa
         for (size_t j = K0; j < K; ++j) {
           const double* e = &em[4 * j];
           double s = 2, sc = 1;
-          if (dl) {
-            double dot = 0;
-            const float* a = Xl.row(Eigen::Index(i)).data();
-            const float* b = &El[j * size_t(dl)];
-            for (int k = 0; k < dl; ++k) dot += double(a[k]) * b[k];
-            s = ssim_from_moments(dl, m[0], m[1], e[0], e[1], dot, m[2], true, &sc) - thr_l;
-          }
-          if (dc && s > bs) {
-            double dot = 0;
-            const float* a = Xc.row(Eigen::Index(i)).data();
-            const float* b = &Ec[j * size_t(dc)];
-            for (int k = 0; k < dc; ++k) dot += double(a[k]) * b[k];
-            s = std::min(s, ssim_from_moments(dc, m[3], m[4], e[2], e[3], dot, 1.0, false, nullptr) - thr_c);
-          }
+          const Eigen::Index r = Eigen::Index(row_of[j - K0]);
+          if (dl) s = ssim_from_moments(dl, m[0], m[1], e[0], e[1], Hl(Eigen::Index(i), r), m[2], true, &sc) - thr_l;
+          if (dc && s > bs) s = std::min(s, ssim_from_moments(dc, m[3], m[4], e[2], e[3], Hc(Eigen::Index(i), r), 1.0, false, nullptr) - thr_c);
           if (s > bs) bs = s, bj = int(j), bsc = sc;
         }
       }
@@ -203,6 +210,7 @@ PassOut leader_pass(const Btf& btf, const ResamplePlan& plan, int level, Part pa
       if (dl) El.insert(El.end(), Xl.row(Eigen::Index(i)).data(), Xl.row(Eigen::Index(i)).data() + dl);
       if (dc) Ec.insert(Ec.end(), Xc.row(Eigen::Index(i)).data(), Xc.row(Eigen::Index(i)).data() + dc);
       em.insert(em.end(), {m[0], m[1], m[3], m[4]});
+      row_of.push_back(uint32_t(i));
       out.idx[ci] = uint32_t(K++);
       out.scale[ci] = 1;
       out.created.push_back(cand[ci]);
@@ -266,6 +274,7 @@ Result<Hierarchy> encode_hierarchy(const Btf& btf, const EncodeOptions& o, Encod
   h.grid = o.grid;
   h.scheme = o.scheme;
   h.scale_bits = o.scale_bits;
+  h.value_bits = o.value_bits;
   const Grid& g = h.grid;
   const int s = o.scheme;
   const ResamplePlan plan = make_plan(d, g);
@@ -279,7 +288,9 @@ Result<Hierarchy> encode_hierarchy(const Btf& btf, const EncodeOptions& o, Encod
   std::vector<uint32_t>* pidx = &h.texel_idx;
   std::vector<float>* pscale = &h.texel_scale;
   for (int k = 4; k > s; --k) {
+    auto tp = std::chrono::steady_clock::now();
     PassOut po = leader_pass(btf, plan, k, k_rgb, cand, o.thr[k], o.thr_chroma[k], o.cl_search);
+    rep.pass_seconds[k_rgb][k] = std::chrono::duration<double>(std::chrono::steady_clock::now() - tp).count();
     *pidx = std::move(po.idx);
     *pscale = std::move(po.scale);
     Book& b = h.rgb[k];
@@ -292,8 +303,12 @@ Result<Hierarchy> encode_hierarchy(const Btf& btf, const EncodeOptions& o, Encod
   }
   // The split level: luminance and chromaticity codebooks, merged pairwise by M.
   {
+    auto tp = std::chrono::steady_clock::now();
     PassOut pl = leader_pass(btf, plan, s, k_lum, cand, o.thr[s], o.thr_chroma[s], o.cl_search);
+    auto tq = std::chrono::steady_clock::now();
     PassOut pc = leader_pass(btf, plan, s, k_chroma, cand, o.thr[s], o.thr_chroma[s], o.cl_search);
+    rep.pass_seconds[k_lum][s] = std::chrono::duration<double>(tq - tp).count();
+    rep.pass_seconds[k_chroma][s] = std::chrono::duration<double>(std::chrono::steady_clock::now() - tq).count();
     std::unordered_map<uint64_t, uint32_t> pairs;
     pidx->resize(cand.size());
     for (size_t i = 0; i < cand.size(); ++i) {
@@ -311,8 +326,12 @@ Result<Hierarchy> encode_hierarchy(const Btf& btf, const EncodeOptions& o, Encod
   for (int k = s; k >= 1; --k) {
     h.lum[k].n = h.chroma[k].n = uint32_t(g.n(k));
     if (k == 1) break;
+    auto tp = std::chrono::steady_clock::now();
     PassOut pl = leader_pass(btf, plan, k - 1, k_lum, children(org_lum[k], g, k), o.thr[k - 1], o.thr_chroma[k - 1], o.cl_search);
+    auto tq = std::chrono::steady_clock::now();
     PassOut pc = leader_pass(btf, plan, k - 1, k_chroma, children(org_chroma[k], g, k), o.thr[k - 1], o.thr_chroma[k - 1], o.cl_search);
+    rep.pass_seconds[k_lum][k - 1] = std::chrono::duration<double>(tq - tp).count();
+    rep.pass_seconds[k_chroma][k - 1] = std::chrono::duration<double>(std::chrono::steady_clock::now() - tq).count();
     h.lum[k].child = std::move(pl.idx);
     h.lum[k].scale = std::move(pl.scale);
     h.chroma[k].child = std::move(pc.idx);
@@ -322,6 +341,7 @@ Result<Hierarchy> encode_hierarchy(const Btf& btf, const EncodeOptions& o, Encod
     org_chroma[k - 1] = std::move(pc.created);
   }
 
+  const auto t_refit = std::chrono::steady_clock::now();
   // Bottom-up: level-1 values (luminance normalized to a maximum of 1, both rounded to half, as
   // stored), then every scale refitted against the final reconstructions and quantized.
   const size_t nb = size_t(g.nbeta);
@@ -334,12 +354,12 @@ Result<Hierarchy> encode_hierarchy(const Btf& btf, const EncodeOptions& o, Encod
       float* v = &l1.values[e * nb];
       extract(plan, btf.abrdf(org_lum[1][e].texel), org_lum[1][e].first, nb, v, nullptr);
       const float mx = *std::max_element(v, v + nb);
-      for (size_t j = 0; j < nb; ++j) v[j] = mx > 0 ? float(Imath::half(v[j] / mx)) : 0.f;
+      for (size_t j = 0; j < nb; ++j) v[j] = mx > 0 ? store_value(v[j] / mx, h.value_bits) : 0.f;
     }
     for (size_t e = 0; e < c1.K; ++e) {
       float* v = &c1.values[e * 2 * nb];
       extract(plan, btf.abrdf(org_chroma[1][e].texel), org_chroma[1][e].first, nb, nullptr, v);
-      for (size_t j = 0; j < 2 * nb; ++j) v[j] = float(Imath::half(v[j]));
+      for (size_t j = 0; j < 2 * nb; ++j) v[j] = store_value(v[j], h.value_bits);
     }
   }
   for (int k = 2; k <= s; ++k) refit_book(btf, plan, h, h.lum[k], k, k_lum, org_lum[k]);
@@ -381,6 +401,7 @@ Result<Hierarchy> encode_hierarchy(const Btf& btf, const EncodeOptions& o, Encod
     ssim_sum += ssim_from_moments(double(G), m[0], m[1], sc * m[2], sc * sc * m[3], sc * m[4], peak[t], false, nullptr);
   }
   rep.mean_texel_ssim = N ? ssim_sum / double(N) : 1;
+  rep.refit_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_refit).count();
   for (int k = 1; k <= 4; ++k) rep.entries[k_rgb][k] = h.rgb[k].K, rep.entries[k_lum][k] = h.lum[k].K, rep.entries[k_chroma][k] = h.chroma[k].K;
   rep.merge_entries = h.merge_size();
 
@@ -390,7 +411,7 @@ Result<Hierarchy> encode_hierarchy(const Btf& btf, const EncodeOptions& o, Encod
     const size_t nl = d.num_lights(), nv = d.num_views(), nc = size_t(d.channels);
     std::vector<Stencil> st(nl * nv);
     for (size_t v = 0; v < nv; ++v)
-      for (size_t l = 0; l < nl; ++l) st[l + nl * v] = stencil(g, grid_coord(g, d.lights.dirs[l], d.views.dirs[v]));
+      for (size_t l = 0; l < nl; ++l) st[l + nl * v] = measured_stencil(g, d, l, v);
     double num = 0, den = 0;
     std::vector<float> lum(G), chroma(2 * G);
     for (size_t t = 0; t < N; t += step) {

@@ -2,6 +2,7 @@
 // See mlvq.h for the paper and the pipeline.
 #include "codecs/mlvq/mlvq.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 
@@ -14,20 +15,32 @@ namespace mlvq {
 namespace {
 
 const ParamSpec k_params[] = {
-    {"scheme", ParamSpec::Type::choice, "best", 0, 0, {"best", "1", "2", "3", "4"},
+    {"scheme", ParamSpec::Type::choice, "4", 0, 0, {"best", "1", "2", "3", "4"},
      "level at which luminance and chromaticity split (paper Fig. 2); best = encode with all four, keep the smallest"},
-    {"ssim4", ParamSpec::Type::real, "0.9", 0, 1, {}, "SSIM threshold for reusing a 4D codebook entry (per texel)"},
-    {"ssim3", ParamSpec::Type::real, "0.9", 0, 1, {}, "SSIM threshold for 3D entries (per view azimuth)"},
-    {"ssim2", ParamSpec::Type::real, "0.95", 0, 1, {}, "SSIM threshold for 2D entries (per view elevation)"},
-    {"ssim1", ParamSpec::Type::real, "0.98", 0, 1, {}, "SSIM threshold for 1D entries (per light alpha)", true},
+    {"ssim4", ParamSpec::Type::real, "0.95", 0, 1, {}, "SSIM threshold for reusing a 4D codebook entry (per texel)"},
+    {"ssim3", ParamSpec::Type::real, "0.93", 0, 1, {}, "SSIM threshold for 3D entries (per view azimuth / view group)"},
+    {"ssim2", ParamSpec::Type::real, "0.9", 0, 1, {}, "SSIM threshold for 2D entries (per view elevation / view)"},
+    {"ssim1", ParamSpec::Type::real, "0.9", 0, 1, {}, "SSIM threshold for 1D entries (per light alpha / light group)", true},
+    {"chroma", ParamSpec::Type::real, "3", 0, 100, {},
+     "chromaticity thresholds = 1 - chroma (1 - luminance threshold) per level"},
+    {"layout", ParamSpec::Type::choice, "auto", 0, 0, {"auto", "measured", "grid"},
+     "measured = the hierarchy over the measured directions (groups of views / lights, no resampling); grid = the paper's resampled 4D "
+     "grid (phi, theta, alpha, beta); auto = grid when any of those four is given, else measured"},
     {"phi", ParamSpec::Type::integer, "16", 1, 64, {}, "view azimuth nodes (level 4)"},
     {"theta", ParamSpec::Type::integer, "7", 2, 64, {}, "view elevation nodes over [0, 90] degrees (level 3)"},
     {"alpha", ParamSpec::Type::integer, "11", 2, 63, {}, "light alpha nodes over [-90, 90] degrees (level 2)"},
     {"beta", ParamSpec::Type::integer, "11", 3, 63, {}, "light beta nodes, uniform in sin(beta) (level 1; odd)"},
+    {"value_bits", ParamSpec::Type::integer, "8", 0, 16, {},
+     "level-1 values in steps of 2^-bits, zstd-coded (zq); 0 = half floats (the paper's storage)"},
     {"huffman", ParamSpec::Type::choice, "auto", 0, 0, {"auto", "off"}, "Huffman-code index streams where smaller (auto) or always bit-pack"},
-    {"scale_bits", ParamSpec::Type::choice, "auto", 0, 0, {"auto", "8", "16"}, "scale storage; auto = 8 for LDR, 16 for HDR data (max > 1)"},
-    {"noise", ParamSpec::Type::choice, "off", 0, 0, {"auto", "off"},
-     "auto = cap each level's thresholds at the SSIM two noisy copies of one signal reach (noise estimated from the data); off = thresholds as given"},
+    {"scale_bits", ParamSpec::Type::choice, "auto", 0, 0, {"auto", "8", "10", "12", "16"},
+     "log-uniform scale codes (zstd-coded where smaller); auto = 8 for LDR, 10 for HDR data (max > 1)"},
+    {"noise", ParamSpec::Type::choice, "auto", 0, 0, {"auto", "off"},
+     "auto = cap each level's thresholds at the SSIM two noisy copies of one signal reach (noise estimated from the data; never more "
+     "than 0.2 below the given threshold); off = thresholds as given"},
+    {"min_ratio", ParamSpec::Type::real, "30", 0, 1e9, {},
+     "if the payload is larger than float32 raw / min_ratio, relax all thresholds (1 - t -> 1.6 (1 - t)) and encode again, at most 4 "
+     "times; 0 = off"},
 };
 
 class MlvqCodec final : public Codec {
@@ -46,19 +59,38 @@ class MlvqCodec final : public Codec {
     o.grid.ntheta = int(p.get_int("theta"));
     o.grid.nalpha = int(p.get_int("alpha"));
     o.grid.nbeta = int(p.get_int("beta"));
-    if (o.grid.nbeta % 2 == 0) return invalid_argument("mlvq: beta must be odd (a node at beta = 0), got " + std::to_string(o.grid.nbeta));
-    for (int k = 1; k <= 4; ++k) o.thr[k] = o.thr_chroma[k] = p.get_real("ssim" + std::to_string(k));
+    const bool grid_given = p.was_set("phi") || p.was_set("theta") || p.was_set("alpha") || p.was_set("beta");
+    if (p.get("layout") == "measured" || (p.get("layout") == "auto" && !grid_given)) o.grid = measured_grid(d);
+    else if (o.grid.nbeta % 2 == 0) return invalid_argument("mlvq: beta must be odd (a node at beta = 0), got " + std::to_string(o.grid.nbeta));
+    for (int k = 1; k <= 4; ++k) {
+      o.thr[k] = p.get_real("ssim" + std::to_string(k));
+      o.thr_chroma[k] = 1 - p.get_real("chroma") * (1 - o.thr[k]);
+    }
     NoiseCeilings nc;
     if (p.get("noise") == "auto") {
       nc = noise_ceilings(btf, make_plan(d, o.grid), estimate_noise(btf));
-      for (int k = 1; k <= 4; ++k) o.thr[k] = std::min(o.thr[k], nc.lum[k]), o.thr_chroma[k] = std::min(o.thr_chroma[k], nc.chroma[k]);
+      // The floor (0.2 below the given threshold) bounds what a misestimate can do: the image-domain
+      // estimator counts texel-scale contrast as noise (see mlvq.h).
+      for (int k = 1; k <= 4; ++k)
+        o.thr[k] = std::min(o.thr[k], std::max(nc.lum[k], o.thr[k] - 0.2)),
+        o.thr_chroma[k] = std::min(o.thr_chroma[k], std::max(nc.chroma[k], o.thr_chroma[k] - 0.2));
     }
     // HDR from the data range: any value above 1 (or an HDR source) needs 16-bit scales.
-    float mx = 0;
-    for (size_t i = 0; i < btf.size(); ++i) mx = std::max(mx, btf.data()[i]);
+    // 10-bit scales cover 1e6 within a stream (codebook.cpp); when the texels' peaks alone span
+    // more than 1e4, the texel scales need the 16-bit (unclipped) codes.
+    float mx = 0, pmin = 0;
+    {
+      const size_t n = d.num_texels(), a = d.abrdf_size();
+      for (size_t t = 0; t < n; ++t) {
+        const float* v = btf.abrdf(t);
+        const float pk = *std::max_element(v, v + a);
+        mx = std::max(mx, pk);
+        if (pk > 0) pmin = pmin == 0 ? pk : std::min(pmin, pk);
+      }
+    }
     const bool hdr = d.hdr || mx > 1.0f;
     const std::string sb = p.get("scale_bits");
-    o.scale_bits = sb == "auto" ? (hdr ? 16 : 8) : std::stoi(sb);
+    o.scale_bits = sb == "auto" ? (!hdr ? 8 : (pmin > 0 && mx / pmin > 1e4f) ? 16 : 10) : std::stoi(sb);
     // The search kernel pays off on GPUs; on CPU devices (PoCL) OpenBLAS GEMMs are faster.
     std::string why;
     o.cl_search = ocl::use_opencl(&why);
@@ -66,6 +98,7 @@ class MlvqCodec final : public Codec {
       auto rt = ocl::Runtime::get();
       o.cl_search = rt.ok() && rt.value()->info().type.find("GPU") != std::string::npos;
     }
+    o.value_bits = int(p.get_int("value_bits"));
     const bool huffman = p.get("huffman") == "auto";
     const std::string scheme = p.get("scheme");
     std::vector<int> schemes = scheme == "best" ? std::vector<int>{1, 2, 3, 4} : std::vector<int>{std::stoi(scheme)};
@@ -77,14 +110,28 @@ class MlvqCodec final : public Codec {
     std::vector<Candidate> cands;
     const auto t0 = std::chrono::steady_clock::now();
     if (ctx.progress) ctx.progress->start("mlvq schemes", schemes.size());
-    for (int s : schemes) {
-      o.scheme = s;
-      Candidate c;
-      BTFC_ASSIGN_OR_RETURN(Hierarchy h, encode_hierarchy(btf, o, c.rep));
-      c.model = std::make_unique<MlvqModel>(d, p.canonical(), std::move(h), huffman);
-      c.bytes = c.model->payload_bytes();
-      cands.push_back(std::move(c));
-      if (ctx.progress) ctx.progress->advance();
+    // The ratio floor: thresholds that keep too much (very noisy data, or thresholds set high)
+    // are relaxed geometrically in 1 - t and the whole encode repeated, so the default never
+    // gives a tiny ratio (issue 22: >= 30 : 1 on any full BTF); each retry is faster than the
+    // one before (fewer entries).
+    const double min_ratio = p.get_real("min_ratio"), raw_bytes = double(d.num_values()) * 4;
+    int relaxed = 0;
+    for (;;) {
+      for (int s : schemes) {
+        o.scheme = s;
+        Candidate c;
+        BTFC_ASSIGN_OR_RETURN(Hierarchy h, encode_hierarchy(btf, o, c.rep));
+        c.model = std::make_unique<MlvqModel>(d, p.canonical(), std::move(h), huffman);
+        c.bytes = c.model->payload_bytes();
+        cands.push_back(std::move(c));
+        if (ctx.progress) ctx.progress->advance();
+      }
+      uint64_t smallest = UINT64_MAX;
+      for (const Candidate& c : cands) smallest = std::min(smallest, c.bytes);
+      if (min_ratio <= 0 || relaxed >= 4 || double(smallest) * min_ratio <= raw_bytes) break;
+      cands.clear();
+      ++relaxed;
+      for (int k = 1; k <= 4; ++k) o.thr[k] = 1 - 1.6 * (1 - o.thr[k]), o.thr_chroma[k] = 1 - 1.6 * (1 - o.thr_chroma[k]);
     }
     if (ctx.progress) ctx.progress->finish();
     // "Smallest at equal quality": among the schemes whose estimated quality is within 0.005 of
@@ -120,6 +167,13 @@ class MlvqCodec final : public Codec {
       st.add("threshold.lum" + std::to_string(k), o.thr[k]);
       st.add("threshold.chroma" + std::to_string(k), o.thr_chroma[k]);
     }
+    for (int k = 4; k >= 1; --k)
+      for (int q = 0; q < 3; ++q)
+        if (c.rep.pass_seconds[q][k] > 0) st.add(std::string("seconds.") + (q == 0 ? "rgb" : q == 1 ? "lum" : "chroma") + std::to_string(k), c.rep.pass_seconds[q][k]);
+    st.add("seconds.refit", c.rep.refit_seconds);
+    st.add("relaxed", relaxed);
+    st.add("layout_measured", h.grid.measured() ? 1 : 0);
+    st.add("value_bits", h.value_bits);
     st.add("mean_texel_ssim", c.rep.mean_texel_ssim);
     st.add("resample_rel_rmse", c.rep.resample_rel_rmse);
     for (const Candidate& o2 : cands) {

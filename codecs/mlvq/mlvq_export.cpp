@@ -149,8 +149,13 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
     std::vector<float> mc(nl * nv * 4);
     for (size_t v = 0; v < nv; ++v)
       for (size_t l = 0; l < nl; ++l) {
-        const mlvq::GridCoord c = mlvq::grid_coord(g, d.lights.dirs[l], d.views.dirs[v]);
         float* o = &mc[(v * nl + l) * 4];
+        if (g.measured()) {  // the node of the pair: integer coordinates (weight 1 on one node)
+          const mlvq::Stencil st = mlvq::measured_stencil(g, d, l, v);
+          o[0] = float(st.i[3][0]), o[1] = float(st.i[2][0]), o[2] = float(st.i[1][0]), o[3] = float(st.i[0][0]);
+          continue;
+        }
+        const mlvq::GridCoord c = mlvq::grid_coord(g, d.lights.dirs[l], d.views.dirs[v]);
         o[0] = c.phi, o[1] = c.theta, o[2] = c.alpha, o[3] = c.beta;
       }
     // Always float: coordinates in node units (phi up to 64) would move by ~0.03 nodes in half.
@@ -158,6 +163,11 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
     t.meaning = "grid coordinates (node units) of measured (light = x, view = y), as the model computes them";
     t.channel_meaning = {"phi", "theta", "alpha", "beta"};
     b.textures.push_back(std::move(t));
+  }
+  if (g.measured()) {  // arbitrary directions: the 9-lookup Delaunay blend of measured pairs, as the model
+    BTFC_ASSIGN_OR_RETURN(auto dm, direction_maps(d, opt.direction_map));
+    b.textures.push_back(std::move(dm.first));
+    b.textures.push_back(std::move(dm.second));
   }
   for (const GpuTexture& t : b.textures)
     if (t.width > 2048 || t.height > 2048)
@@ -193,6 +203,11 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
       {"line_layout", "1D arrays: entry i at texel (i % width, i / width), width = min(count, " + std::to_string(k_line_width) +
                           "); decoded float = stored * scale"},
       {"measured", "btf_eval_measured(uv, l, v) evaluates at the grid coordinates measured_coord(l, v)"},
+      {"layout", g.measured() ? "measured" : "grid"},
+      {"directions", g.measured() ? "layout measured: the nodes are measured (light, view) pairs (node (phi, theta, alpha, beta) = view phi * ntheta + theta, "
+                                    "light alpha * nbeta + beta, clamped to the last); btf_eval(wl, wv) = sum_ij wl_i wv_j btf_eval_measured(il_i, iv_j) "
+                                    "over dir_index / dir_weight layers 0 (light), 1 (view)"
+                                  : "layout grid: btf_eval(wl, wv) interpolates at mlvq_grid_coord(wl, wv)"},
       {"one_channel", d.channels == 1 ? "grey BTF: output (R, 0, 0)" : "RGB"}};
   b.glsl = shader(b);
   return b;

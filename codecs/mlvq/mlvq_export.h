@@ -1,5 +1,5 @@
 // mlvq GPU export, shared between mlvq_export.cpp (textures, manifest) and mlvq_export_glsl.cpp
-// (the reference shader and its CPU emulation). Not public API: formats/gpu/export.h is.
+// (the reference shader and its CPU emulation). Not public API: codecs/gpu_export.h is.
 //
 // What the renderer of seed 003 (section 3, "chained indexing from the existing codebooks, with
 // necessary interpolation among data vectors") reads, as textures (nearest, texelFetch):
@@ -13,6 +13,11 @@
 //   chroma1       1D array, K * nbeta, rg16f / rg32f    level-1 chromaticity (r, g) vectors
 //   measured_coord  nL x nV rgba32f: grid coordinates (phi, theta, alpha, beta) of every measured
 //                 (light, view), so btf_eval_measured uses exactly the model's stencils.
+//                 Layout measured (mlvq.h): integers, the node of the pair itself.
+//   dir_index / dir_weight  (layout measured only) the parabolic Delaunay maps of
+//                 codecs/gpu_export.h: btf_eval(wl, wv) blends btf_eval_measured over the 3 x 3
+//                 pairs they give, as the model's eval_dir blends over core/interp.h's weights.
+//                 The manifest's evaluation.layout says which ("grid" when absent).
 // 1D arrays: entry i at texel (i % width, i / width), width = min(count, k_line_width); rows past
 // the end are zero. Float textures: decoded = stored * scale (a power of two, manifest + shader).
 #pragma once

@@ -1,4 +1,4 @@
-// mlvq reference shader (GLSL ES 3.00, contract in formats/gpu/export.h) and its CPU emulation.
+// mlvq reference shader (GLSL ES 3.00, contract in codecs/gpu_export.h) and its CPU emulation.
 // The two are kept side by side and mirror each other statement by statement: the emulation
 // reads only the bundle's stored texel values, in the shader's float arithmetic, so a test that
 // compares it with the model checks the textures and the formula, and a GL run that compares the
@@ -24,8 +24,9 @@ const auto num = glsl_float;
 
 struct View {
   int scheme = 2, channels = 3, n[5] = {0, 0, 0, 0, 0};
+  bool measured = false;  // layout measured: directions by the Delaunay maps (export.h)
   const GpuTexture *texel_index = nullptr, *texel_scale = nullptr, *merge = nullptr, *lum1 = nullptr, *chroma1 = nullptr,
-                   *measured = nullptr;
+                   *measured_coord = nullptr;
   const GpuTexture* index[3][5] = {};
   const GpuTexture* scale[3][5] = {};
 };
@@ -37,8 +38,9 @@ View view_of(const ExportBundle& b) {
   v.channels = e.at("channels").get<int>();
   const nlohmann::json& g = e.at("grid");
   v.n[1] = g.at("nbeta").get<int>(), v.n[2] = g.at("nalpha").get<int>(), v.n[3] = g.at("ntheta").get<int>(), v.n[4] = g.at("nphi").get<int>();
+  v.measured = e.contains("layout") && e.at("layout") == "measured";
   v.texel_index = b.find("texel_index"), v.texel_scale = b.find("texel_scale"), v.merge = b.find("merge");
-  v.lum1 = b.find("lum1"), v.chroma1 = b.find("chroma1"), v.measured = b.find("measured_coord");
+  v.lum1 = b.find("lum1"), v.chroma1 = b.find("chroma1"), v.measured_coord = b.find("measured_coord");
   for (int k = 2; k <= 4; ++k)
     for (int p = 0; p < 3; ++p) {
       v.index[p][k] = b.find(book_texture(k_parts[p], k, "index"));
@@ -149,9 +151,18 @@ void emulate(const ExportBundle& b, const ShaderQuery& q, float* rgb) {
   int x, y;
   uv_texel(q.u, q.v, b.desc.width, b.desc.height, x, y);
   float c[4];
+  const GpuTexture& M = *V.measured_coord;
+  auto at_measured = [&](int l, int v, float* out) {
+    float cc[4];
+    for (int i = 0; i < 4; ++i) cc[i] = M.f[0][(size_t(v) * M.width + size_t(l)) * 4 + size_t(i)];
+    eval(V, x, y, cc, out);
+  };
   if (q.light >= 0) {
-    const GpuTexture& M = *V.measured;
     for (int i = 0; i < 4; ++i) c[i] = M.f[0][(size_t(q.view) * M.width + size_t(q.light)) * 4 + size_t(i)];
+  } else if (V.measured) {
+    emulate_delaunay(b, q.wl, q.wv, at_measured, rgb);
+    if (V.channels == 1) rgb[1] = rgb[2] = 0;
+    return;
   } else {
     grid_coord(V, q.wl, q.wv, c);
   }
@@ -168,12 +179,13 @@ std::string shader(const ExportBundle& b) {
                   "// (phi_v, theta_v, alpha, beta) around the query, blended multilinearly; colour split at level " +
                   std::to_string(V.scheme) + ".\nprecision highp float;\nprecision highp int;\n";
   for (const GpuTexture& t : b.textures)
-    s += std::string("uniform highp ") + (t.is_integer() ? "usampler2D" : "sampler2D") + " u_" + t.name + ";\n";
+    s += std::string("uniform highp ") + (t.is_integer() ? "usampler2D" : "sampler2D") + (t.layers ? "Array" : "") + " u_" + t.name + ";\n";
   s += glsl_common();
   s += "const ivec2 SIZE = ivec2(" + std::to_string(b.desc.width) + ", " + std::to_string(b.desc.height) + ");\n";
   s += "const int NPHI = " + std::to_string(V.n[4]) + ", NTHETA = " + std::to_string(V.n[3]) + ", NALPHA = " + std::to_string(V.n[2]) +
        ", NBETA = " + std::to_string(V.n[1]) + ";\n";
   s += "const float PI = 3.14159265358979;\n";
+  if (V.measured) s += "const int DIR_N = " + std::to_string(b.find("dir_index")->width) + ";\n";
   for (const GpuTexture& t : b.textures)
     if (!t.is_integer()) s += "const float S_" + t.name + " = " + num(t.scale) + ";\n";
   s += R"(// Entry i of a 1D array stored in rows of textureSize().x texels.
@@ -268,9 +280,17 @@ vec3 mlvq_eval(ivec2 xy, vec4 c) {
   s += "vec3 btf_eval_measured(vec2 uv, int light, int view) {\n"
        "  vec3 r = mlvq_eval(btfc_texel(uv, SIZE), texelFetch(u_measured_coord, ivec2(light, view), 0));\n"
        "  return " + ret + ";\n}\n";
-  s += "vec3 btf_eval(vec2 uv, vec3 wl, vec3 wv) {\n"
-       "  vec3 r = mlvq_eval(btfc_texel(uv, SIZE), mlvq_grid_coord(wl, wv));\n"
-       "  return " + ret + ";\n}\n";
+  if (V.measured) {
+    s += glsl_delaunay_function("vec3 mlvq_eval_dir(ivec2 xy, vec3 wl, vec3 wv)", "",
+                                "mlvq_eval(xy, texelFetch(u_measured_coord, ivec2(int(il[i]), int(iv[j])), 0))");
+    s += "vec3 btf_eval(vec2 uv, vec3 wl, vec3 wv) {\n"
+         "  vec3 r = mlvq_eval_dir(btfc_texel(uv, SIZE), wl, wv);\n"
+         "  return " + ret + ";\n}\n";
+  } else {
+    s += "vec3 btf_eval(vec2 uv, vec3 wl, vec3 wv) {\n"
+         "  vec3 r = mlvq_eval(btfc_texel(uv, SIZE), mlvq_grid_coord(wl, wv));\n"
+         "  return " + ret + ";\n}\n";
+  }
   s += "#ifndef BTFC_NO_MAIN\nin vec2 v_uv;\nin vec3 v_wl;\nin vec3 v_wv;\nout vec4 btf_color;\n"
        "void main() { btf_color = vec4(btf_eval(v_uv, normalize(v_wl), normalize(v_wv)), 1.0); }\n#endif\n";
   return s;

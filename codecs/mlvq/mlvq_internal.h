@@ -30,8 +30,21 @@ class DeviceModel;  // mlvq_cl.h
 // phi_v, which is what lets 3D slices of different azimuths share codebook entries.
 // Node order: node = beta + nbeta (alpha + nalpha (theta + ntheta phi)), so a level-k slice
 // (fixed coordinates above k) is a contiguous run of slice_len(k) nodes.
+//
+// Layout "measured" (the default since payload version 2; see mlvq.h for why): the same four
+// levels over the *measured* directions instead of a resampled grid. Level 4's axis (nphi
+// nodes) are groups of ntheta consecutive views, level 3's (ntheta) the views of a group,
+// level 2's (nalpha) groups of nbeta consecutive lights, level 1's (nbeta) the lights of a
+// group: node (ip, it, ia, ib) is view ip ntheta + it, light ia nbeta + ib, clamped to the last
+// view / light where the groups overhang the sets (the padding repeats a measured value, so
+// it costs no new codebook entry shapes). Grid coordinates of a measured (light, view) are
+// those integers; arbitrary directions are interpolated between measured ones (core/interp.h).
+enum Layout : int { k_layout_grid = 0, k_layout_measured = 1 };
 struct Grid {
   int nphi = 16, ntheta = 7, nalpha = 11, nbeta = 11;
+  int layout = k_layout_grid;
+  int nl = 0, nv = 0;  // measured layout: the BTF's light / view counts
+  bool measured() const { return layout == k_layout_measured; }
   // Children per entry at level k (4: phi, 3: theta, 2: alpha, 1: beta values).
   int n(int level) const { return level == 4 ? nphi : level == 3 ? ntheta : level == 2 ? nalpha : nbeta; }
   size_t slice_len(int level) const {
@@ -41,6 +54,16 @@ struct Grid {
   }
   size_t size() const { return slice_len(4); }
 };
+
+// The measured layout of a BTF: group sizes nbeta = ceil(sqrt(nL)), nalpha = ceil(nL / nbeta),
+// ntheta = ceil(sqrt(nV)), nphi = ceil(nV / ntheta) (81 directions: 9 x 9).
+Grid measured_grid(const BtfDesc& d);
+// Measured layout: the (light, view) of a node index.
+void node_measured(const Grid& g, size_t node, uint32_t& light, uint32_t& view);
+// The stencil of measured (light, view): the grid's multilinear stencil, or (measured layout)
+// weight 1 on the node of that pair.
+struct Stencil;
+Stencil measured_stencil(const Grid& g, const BtfDesc& d, size_t light, size_t view);
 
 // Continuous grid coordinates of a (light, view) pair: node units on each axis (phi wraps).
 struct GridCoord {
@@ -70,6 +93,7 @@ void lrg_to_rgb(const float* lrg, float* rgb);
 struct ResamplePlan {
   Grid grid;
   int channels = 3;
+  bool direct = false;  // measured layout: one tap of weight 1 per node
   std::vector<std::array<uint32_t, 9>> off;
   std::vector<std::array<float, 9>> w;
 };
@@ -99,6 +123,10 @@ struct Hierarchy {
   Grid grid;
   int scheme = 2;    // luminance / chromaticity split at this level (1..4)
   int scale_bits = 8;
+  // Level-1 values: 0 = f16 (payload version 1), else uniform steps of 2^-value_bits stored as
+  // a zq tensor (core/quant.h: integers, zstd). Luminance is normalized to a maximum of 1 per
+  // entry and chromaticity lies in [0, 1], so one step fits every column.
+  int value_bits = 0;
   Book rgb[5], lum[5], chroma[5];  // by level 1..4: rgb for k > scheme, lum / chroma for k <= scheme
   std::vector<uint32_t> merge_lum, merge_chroma;  // M: pairs (index into lum[s], chroma[s])
   std::vector<uint32_t> texel_idx;                // per texel: entry of level 4 (rgb[4], or M when scheme = 4)
@@ -143,9 +171,14 @@ struct NoiseCeilings {
 };
 NoiseCeilings noise_ceilings(const Btf& btf, const ResamplePlan& plan, const NoiseEstimate& ne, size_t sample_texels = 64);
 
+// The stored form of a level-1 value (f16 rounding, or the zq step): the encoder applies it
+// before refitting the scales, so the model in memory equals its file.
+float store_value(float v, int value_bits);
+
 struct EncodeOptions {
   Grid grid;
   int scheme = 2;
+  int value_bits = 0;
   // SSIM thresholds by level, for luminance (and RGB levels' luminance part) and chromaticity.
   double thr[5] = {0, 0.98, 0.97, 0.95, 0.95};
   double thr_chroma[5] = {0, 0.98, 0.97, 0.95, 0.95};
@@ -159,6 +192,8 @@ struct EncodeReport {
   double mean_texel_ssim = 0;   // luminance SSIM of resampled vs reconstructed 4D vectors
   double resample_rel_rmse = 0; // measured -> grid -> measured on a texel sample, no quantization
   double seconds = 0;
+  double pass_seconds[3][5] = {};  // [part][level]: the leader passes (search) per codebook
+  double refit_seconds = 0;        // values, scale refits, quality estimate
 };
 
 Result<Hierarchy> encode_hierarchy(const Btf& btf, const EncodeOptions& o, EncodeReport& rep);
@@ -191,7 +226,10 @@ Result<std::vector<uint32_t>> decode_indices(std::span<const uint8_t> bytes, siz
                                              const std::string& what);
 
 // ---- model (mlvq_model.cpp) ------------------------------------------------------------------------
-constexpr uint32_t k_payload_version = 1;
+// 1: grid layout only (header word 7 = 0). 2: header word 7 = layout (0 grid, 1 measured);
+// level-1 luminance values either f16 (as in 1) or a zq tensor (core/quant.h). Version-1 files
+// read as before.
+constexpr uint32_t k_payload_version = 2;
 
 class MlvqModel final : public Model {
  public:
@@ -223,6 +261,9 @@ class MlvqModel final : public Model {
   Hierarchy m_h;
   bool m_huffman = true;
   std::vector<Stencil> m_measured;  // per (light + nL view)
+  // Measured layout: arbitrary directions blend the 3 x 3 nearest measured pairs (core/interp.h).
+  DirectionInterpolator m_li, m_vi;
+  void dir_pairs(const Vec3& wl, const Vec3& wv, uint32_t pair[9], float w[9]) const;
   ModelStats m_stats;
   mutable std::mutex m_dev_mu;  // the device copy for eval_batch, uploaded on first use
   mutable std::shared_ptr<DeviceModel> m_dev;

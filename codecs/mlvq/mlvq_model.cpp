@@ -10,6 +10,7 @@
 #include "codecs/mlvq/mlvq_cl.h"
 #include "codecs/mlvq/mlvq_internal.h"
 #include "core/cl_runtime.h"
+#include "core/quant.h"
 
 namespace btfc::mlvq {
 
@@ -93,7 +94,16 @@ MlvqModel::MlvqModel(BtfDesc desc, std::string spec, Hierarchy h, bool huffman)
   const size_t nl = m_desc.num_lights(), nv = m_desc.num_views();
   m_measured.resize(nl * nv);
   for (size_t v = 0; v < nv; ++v)
-    for (size_t l = 0; l < nl; ++l) m_measured[l + nl * v] = stencil(m_h.grid, grid_coord(m_h.grid, m_desc.lights.dirs[l], m_desc.views.dirs[v]));
+    for (size_t l = 0; l < nl; ++l) m_measured[l + nl * v] = measured_stencil(m_h.grid, m_desc, l, v);
+  if (m_h.grid.measured()) m_li = DirectionInterpolator(m_desc.lights), m_vi = DirectionInterpolator(m_desc.views);
+}
+
+void MlvqModel::dir_pairs(const Vec3& wl, const Vec3& wv, uint32_t pair[9], float w[9]) const {
+  const DirWeights a = m_li.weights(wl), b = m_vi.weights(wv);
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      pair[3 * i + j] = uint32_t(size_t(a.index[size_t(i)]) + m_desc.num_lights() * size_t(b.index[size_t(j)])),
+                   w[3 * i + j] = a.weight[size_t(i)] * b.weight[size_t(j)];
 }
 
 void MlvqModel::eval(int x, int y, int light, int view, float* out) const {
@@ -106,7 +116,20 @@ Status MlvqModel::eval_dir(int x, int y, const Vec3& wl, const Vec3& wv, float* 
   if (x < 0 || y < 0 || x >= m_desc.width || y >= m_desc.height)
     return invalid_argument("texel (" + std::to_string(x) + ", " + std::to_string(y) + ") outside the BTF");
   float rgb[3];
-  eval_stencil(m_h, size_t(x) + size_t(m_desc.width) * size_t(y), stencil(m_h.grid, grid_coord(m_h.grid, wl, wv)), rgb);
+  const size_t t = size_t(x) + size_t(m_desc.width) * size_t(y);
+  if (m_h.grid.measured()) {
+    uint32_t pair[9];
+    float w[9], v[3];
+    dir_pairs(wl, wv, pair, w);
+    rgb[0] = rgb[1] = rgb[2] = 0;
+    for (int k = 0; k < 9; ++k) {
+      if (w[k] == 0) continue;
+      eval_stencil(m_h, t, m_measured[pair[k]], v);
+      for (int c = 0; c < 3; ++c) rgb[c] += w[k] * v[c];
+    }
+  } else {
+    eval_stencil(m_h, t, stencil(m_h.grid, grid_coord(m_h.grid, wl, wv)), rgb);
+  }
   for (int c = 0; c < m_desc.channels; ++c) out[c] = rgb[c];
   return {};
 }
@@ -119,6 +142,44 @@ Status MlvqModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
         (e.light >= 0 && (size_t(e.light) >= d.num_lights() || size_t(e.view) >= d.num_views())))
       return invalid_argument("eval query (" + std::to_string(e.x) + ", " + std::to_string(e.y) + ", light " + std::to_string(e.light) +
                               ", view " + std::to_string(e.view) + ") is outside the BTF");
+  if (m_h.grid.measured()) {
+    // Queries at arbitrary directions become the 9 measured pairs around them (their grid
+    // coordinates are integers, i.e. single nodes), evaluated in one batch and blended here.
+    std::vector<EvalQuery> ex;
+    std::vector<float> wt;
+    ex.reserve(q.size());
+    bool any = false;
+    for (const EvalQuery& e : q) any = any || e.light < 0;
+    if (any) {
+      const size_t nl = d.num_lights();
+      std::vector<uint32_t> cnt(q.size());
+      for (size_t i = 0; i < q.size(); ++i) {
+        if (q[i].light >= 0) {
+          ex.push_back(q[i]), wt.push_back(1.f), cnt[i] = 1;
+          continue;
+        }
+        uint32_t pair[9];
+        float w[9];
+        dir_pairs(q[i].wl, q[i].wv, pair, w);
+        cnt[i] = 0;
+        for (int k = 0; k < 9; ++k) {
+          if (w[k] == 0) continue;
+          EvalQuery e = q[i];
+          e.light = int(pair[k] % nl), e.view = int(pair[k] / nl);
+          ex.push_back(e), wt.push_back(w[k]), cnt[i]++;
+        }
+      }
+      std::vector<float> o(ex.size() * nc);
+      BTFC_RETURN_IF_ERROR(eval_batch(ex, o.data()));
+      size_t at = 0;
+      for (size_t i = 0; i < q.size(); ++i) {
+        for (size_t c = 0; c < nc; ++c) out[i * nc + c] = 0;
+        for (uint32_t k = 0; k < cnt[i]; ++k, ++at)
+          for (size_t c = 0; c < nc; ++c) out[i * nc + c] += wt[at] * o[at * nc + c];
+      }
+      return {};
+    }
+  }
   if (ocl::use_opencl()) {
     std::shared_ptr<DeviceModel> dev;
     Status st;
@@ -137,6 +198,11 @@ Status MlvqModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
 #pragma omp parallel for schedule(static)
       for (size_t i = 0; i < q.size(); ++i) {
         texel[i] = q[i].x + d.width * q[i].y;
+        if (m_h.grid.measured()) {  // node coordinates of the measured pair (all queries are measured here)
+          const size_t l = size_t(q[i].light), v = size_t(q[i].view), nb = size_t(m_h.grid.nbeta), nt = size_t(m_h.grid.ntheta);
+          coord[4 * i] = float(v / nt), coord[4 * i + 1] = float(v % nt), coord[4 * i + 2] = float(l / nb), coord[4 * i + 3] = float(l % nb);
+          continue;
+        }
         const GridCoord c = q[i].light >= 0 ? grid_coord(m_h.grid, d.lights.dirs[size_t(q[i].light)], d.views.dirs[size_t(q[i].view)])
                                             : grid_coord(m_h.grid, q[i].wl, q[i].wv);
         coord[4 * i] = c.phi, coord[4 * i + 1] = c.theta, coord[4 * i + 2] = c.alpha, coord[4 * i + 3] = c.beta;
@@ -275,6 +341,23 @@ Tensor half_tensor(const std::string& name, std::vector<uint64_t> shape, const s
   return t;
 }
 
+// Scale codes as a zq tensor of step 1 (the integers themselves, zstd-coded) when that is
+// smaller than the plain u8 / u16 codes: on noisy HDR data the 16-bit codes are near-random in
+// their low byte, elsewhere (LDR, repeated scales) zstd gains.
+Tensor scale_tensor(const std::string& name, const std::vector<uint16_t>& c, int bits) {
+  Tensor plain = codes_tensor(name, c, bits);
+  if (c.empty()) return plain;
+  std::vector<float> f(c.begin(), c.end());
+  auto z = quant::encode(name, {uint64_t(c.size()), 1}, f.data(), {1.f}, {}, 19);
+  return z.ok() && z.value().bytes.size() < plain.bytes.size() ? std::move(z).value() : plain;
+}
+
+Result<Tensor> value_tensor(const std::string& name, std::vector<uint64_t> shape, const std::vector<float>& v, int value_bits) {
+  if (value_bits <= 0) return half_tensor(name, std::move(shape), v);
+  const uint64_t cols = shape.back();
+  return quant::encode(name, std::move(shape), v.data(), std::vector<float>(cols, std::ldexp(1.f, -value_bits)), {}, 19);
+}
+
 uint32_t child_alphabet(const Hierarchy& h, Part p, int level) {  // size of the book level-1 points into
   if (p == k_rgb && level - 1 == h.scheme) return h.merge_size();
   return book_of(h, p, level - 1).K;
@@ -296,7 +379,7 @@ std::vector<Tensor> MlvqModel::tensors(bool allow_huffman, uint64_t* plain_bytes
     ts.push_back(std::move(t));
   };
   const uint32_t hdr[8] = {uint32_t(h.scheme), uint32_t(h.grid.nphi), uint32_t(h.grid.ntheta), uint32_t(h.grid.nalpha),
-                           uint32_t(h.grid.nbeta), uint32_t(h.scale_bits), h.merge_size(), 0};
+                           uint32_t(h.grid.nbeta), uint32_t(h.scale_bits), h.merge_size(), uint32_t(h.grid.layout)};
   other(Tensor::from_u32("mlvq", {8}, hdr));
   uint32_t books[15] = {0};
   for (int p = 0; p < 3; ++p)
@@ -308,17 +391,19 @@ std::vector<Tensor> MlvqModel::tensors(bool allow_huffman, uint64_t* plain_bytes
       if (b.K == 0) continue;
       coded(book_name(Part(p), k) + ".idx", b.child, child_alphabet(h, Part(p), k));
       if (p != k_chroma) {
-        other(codes_tensor(book_name(Part(p), k) + ".scale", b.scode, h.scale_bits));
+        other(scale_tensor(book_name(Part(p), k) + ".scale", b.scode, h.scale_bits));
         const float r[2] = {b.lo, b.hi};
         other(Tensor::from_f32(book_name(Part(p), k) + ".range", {2}, r));
       }
     }
-  other(half_tensor("lum1.values", {h.lum[1].K, uint64_t(h.grid.nbeta)}, h.lum[1].values));
-  other(half_tensor("chroma1.values", {h.chroma[1].K, uint64_t(h.grid.nbeta), 2}, h.chroma[1].values));
+  // Values: f16 or zq; the encoder stored them quantized (store_value), so zq reproduces them
+  // exactly and cannot fail on them (finite, |q| <= 2^value_bits).
+  other(value_tensor("lum1.values", {h.lum[1].K, uint64_t(h.grid.nbeta)}, h.lum[1].values, h.value_bits).value());
+  other(value_tensor("chroma1.values", {h.chroma[1].K, uint64_t(h.grid.nbeta), 2}, h.chroma[1].values, h.value_bits).value());
   coded("merge.lum", h.merge_lum, h.lum[h.scheme].K);
   coded("merge.chroma", h.merge_chroma, h.chroma[h.scheme].K);
   coded("texel.idx", h.texel_idx, h.scheme == 4 ? h.merge_size() : h.rgb[4].K);
-  other(codes_tensor("texel.scale", h.texel_scode, h.scale_bits));
+  other(scale_tensor("texel.scale", h.texel_scode, h.scale_bits));
   const float r[2] = {h.texel_lo, h.texel_hi};
   other(Tensor::from_f32("texel.range", {2}, r));
   if (plain_bytes) *plain_bytes = plain;
@@ -351,8 +436,9 @@ uint64_t MlvqModel::plain_payload_bytes() const {
 Result<std::vector<Tensor>> MlvqModel::gpu_tensors() const {
   const Hierarchy& h = m_h;
   std::vector<Tensor> out;
-  const uint32_t grid[5] = {uint32_t(h.scheme), uint32_t(h.grid.nphi), uint32_t(h.grid.ntheta), uint32_t(h.grid.nalpha), uint32_t(h.grid.nbeta)};
-  out.push_back(Tensor::from_u32("grid", {5}, grid));
+  const uint32_t grid[6] = {uint32_t(h.scheme), uint32_t(h.grid.nphi), uint32_t(h.grid.ntheta), uint32_t(h.grid.nalpha), uint32_t(h.grid.nbeta),
+                            uint32_t(h.grid.layout)};
+  out.push_back(Tensor::from_u32("grid", {6}, grid));
   out.push_back(Tensor::from_u32("texel_index", {uint64_t(m_desc.height), uint64_t(m_desc.width)}, h.texel_idx.data()));
   out.push_back(Tensor::from_f32("texel_scale", {uint64_t(m_desc.height), uint64_t(m_desc.width)}, h.texel_scale.data()));
   for (int p = 0; p < 3; ++p)
@@ -383,9 +469,20 @@ Result<std::unique_ptr<Model>> MlvqModel::load(const ContainerReader& rd, const 
   for (int i = 1; i <= 4; ++i)
     if (hdr[i] < 1 || hdr[i] > 64) return bad("grid axis " + std::to_string(i) + " has " + std::to_string(hdr[i]) + " nodes (1..64)");
   h.grid.nphi = int(hdr[1]), h.grid.ntheta = int(hdr[2]), h.grid.nalpha = int(hdr[3]), h.grid.nbeta = int(hdr[4]);
-  if (hdr[5] != 8 && hdr[5] != 16) return bad("scale bits " + std::to_string(hdr[5]) + " (8 or 16)");
+  if (hdr[5] != 8 && hdr[5] != 16 && ((hdr[5] != 10 && hdr[5] != 12) || rd.codec().payload_version < 2))
+    return bad("scale bits " + std::to_string(hdr[5]) + " (8, 16, or 10 / 12 from payload version 2)");
   h.scale_bits = int(hdr[5]);
   const uint32_t M = hdr[6];
+  // Word 7: 0 in version 1 (grid layout); the layout from version 2 on.
+  if (rd.codec().payload_version >= 2 && hdr[7] > 1) return bad("layout " + std::to_string(hdr[7]) + " (0 grid, 1 measured)");
+  if (rd.codec().payload_version >= 2 && hdr[7] == k_layout_measured) {
+    const Grid mg = measured_grid(d);
+    if (mg.nphi != h.grid.nphi || mg.ntheta != h.grid.ntheta || mg.nalpha != h.grid.nalpha || mg.nbeta != h.grid.nbeta)
+      return bad("measured layout " + std::to_string(h.grid.nphi) + " x " + std::to_string(h.grid.ntheta) + " x " + std::to_string(h.grid.nalpha) +
+                 " x " + std::to_string(h.grid.nbeta) + " does not fit " + std::to_string(d.num_views()) + " views x " +
+                 std::to_string(d.num_lights()) + " lights");
+    h.grid = mg;
+  }
   BTFC_ASSIGN_OR_RETURN(Tensor bt, rd.read_checked("books", DType::u32, {3, 5}));
   uint32_t books[15];
   std::copy(bt.bytes.begin(), bt.bytes.end(), reinterpret_cast<uint8_t*>(books));
@@ -409,17 +506,28 @@ Result<std::unique_ptr<Model>> MlvqModel::load(const ContainerReader& rd, const 
   };
   auto read_scales = [&](const std::string& name, size_t count, std::vector<uint16_t>& codes, std::vector<float>& v, float& lo,
                          float& hi) -> Status {
-    BTFC_ASSIGN_OR_RETURN(Tensor t, rd.read_checked(name + ".scale", h.scale_bits == 8 ? DType::u8 : DType::u16, {uint64_t(count)}));
+    codes.resize(count);
+    v.resize(count);
+    const TensorInfo* ti = rd.find(name + ".scale");
+    if (ti && ti->dtype == DType::zq) {  // version 2: the codes zstd-coded (scale_tensor)
+      BTFC_ASSIGN_OR_RETURN(std::vector<float> f, rd.read_floats(name + ".scale", {uint64_t(count), 1}));
+      const float top = float((1u << h.scale_bits) - 1);
+      for (size_t i = 0; i < count; ++i) {
+        if (!(f[i] >= 0 && f[i] <= top && f[i] == std::floor(f[i]))) return bad("tensor '" + name + ".scale' holds a code outside 0.." + std::to_string(int(top)));
+        codes[i] = uint16_t(f[i]);
+      }
+    } else {
+      BTFC_ASSIGN_OR_RETURN(Tensor t, rd.read_checked(name + ".scale", h.scale_bits == 8 ? DType::u8 : DType::u16, {uint64_t(count)}));
+      for (size_t i = 0; i < count; ++i) {
+        codes[i] = h.scale_bits == 8 ? t.bytes[i] : uint16_t(t.bytes[2 * i] | (t.bytes[2 * i + 1] << 8));
+        if (codes[i] >= (1u << h.scale_bits)) return bad("tensor '" + name + ".scale' holds a code above " + std::to_string((1u << h.scale_bits) - 1));
+      }
+    }
     BTFC_ASSIGN_OR_RETURN(Tensor r, rd.read_checked(name + ".range", DType::f32, {2}));
     BTFC_ASSIGN_OR_RETURN(std::vector<float> rv, r.to_f32());
     lo = rv[0], hi = rv[1];
     if (!std::isfinite(lo) || !std::isfinite(hi) || lo > hi || hi > 88.f || lo < -104.f) return bad("tensor '" + name + ".range' is not a valid log range");
-    codes.resize(count);
-    v.resize(count);
-    for (size_t i = 0; i < count; ++i) {
-      codes[i] = h.scale_bits == 8 ? t.bytes[i] : uint16_t(t.bytes[2 * i] | (t.bytes[2 * i + 1] << 8));
-      v[i] = dequantize_scale(codes[i], lo, hi, h.scale_bits);
-    }
+    for (size_t i = 0; i < count; ++i) v[i] = dequantize_scale(codes[i], lo, hi, h.scale_bits);
     return {};
   };
   for (int p = 0; p < 3; ++p)
@@ -432,10 +540,18 @@ Result<std::unique_ptr<Model>> MlvqModel::load(const ContainerReader& rd, const 
     }
   const uint64_t nb = uint64_t(h.grid.nbeta);
   {
-    BTFC_ASSIGN_OR_RETURN(Tensor t, rd.read_checked("lum1.values", DType::f16, {h.lum[1].K, nb}));
-    BTFC_ASSIGN_OR_RETURN(h.lum[1].values, t.to_f32());
-    BTFC_ASSIGN_OR_RETURN(Tensor c, rd.read_checked("chroma1.values", DType::f16, {h.chroma[1].K, nb, 2}));
-    BTFC_ASSIGN_OR_RETURN(h.chroma[1].values, c.to_f32());
+    // f16 (version 1 and value_bits 0) or zq; read_floats refuses other dtypes and bad shapes.
+    const TensorInfo* ti = rd.find("lum1.values");
+    if (rd.codec().payload_version < 2 && ti && ti->dtype != DType::f16) return bad("tensor 'lum1.values' is not f16 (payload version 1)");
+    BTFC_ASSIGN_OR_RETURN(h.lum[1].values, rd.read_floats("lum1.values", {h.lum[1].K, nb}));
+    BTFC_ASSIGN_OR_RETURN(h.chroma[1].values, rd.read_floats("chroma1.values", {h.chroma[1].K, nb, 2}));
+    if (ti && ti->dtype == DType::zq) {
+      BTFC_ASSIGN_OR_RETURN(Tensor t, rd.read("lum1.values"));
+      BTFC_ASSIGN_OR_RETURN(quant::Decoded dq, quant::decode_ints(t, rd.path() + ": mlvq tensor 'lum1.values'"));
+      const int e = dq.steps.empty() ? 0 : -std::ilogb(dq.steps[0]);
+      if (dq.steps.empty() || e < 1 || e > 16 || dq.steps[0] != std::ldexp(1.f, -e)) return bad("tensor 'lum1.values' step is not 2^-1 .. 2^-16");
+      h.value_bits = e;
+    }
     for (float x : h.lum[1].values)
       if (!std::isfinite(x)) return bad("tensor 'lum1.values' holds non-finite values");
     for (float x : h.chroma[1].values)

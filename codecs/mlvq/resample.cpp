@@ -43,6 +43,35 @@ void node_dirs(const Grid& g, int iphi, int itheta, int ialpha, int ibeta, Vec3&
   wl = Vec3{float(cp * lx - sp * ly), float(sp * lx + cp * ly), float(lz)};
 }
 
+Grid measured_grid(const BtfDesc& d) {
+  Grid g;
+  g.layout = k_layout_measured;
+  g.nl = int(d.num_lights()), g.nv = int(d.num_views());
+  auto split = [](int n, int& outer, int& inner) {
+    inner = std::max(1, int(std::ceil(std::sqrt(double(n)) - 1e-9)));
+    outer = (n + inner - 1) / inner;
+  };
+  split(g.nl, g.nalpha, g.nbeta);
+  split(g.nv, g.nphi, g.ntheta);
+  return g;
+}
+
+void node_measured(const Grid& g, size_t node, uint32_t& light, uint32_t& view) {
+  const size_t ib = node % size_t(g.nbeta), ia = node / size_t(g.nbeta) % size_t(g.nalpha);
+  const size_t r = node / (size_t(g.nbeta) * size_t(g.nalpha));
+  const size_t it = r % size_t(g.ntheta), ip = r / size_t(g.ntheta);
+  light = uint32_t(std::min(ia * size_t(g.nbeta) + ib, size_t(g.nl - 1)));
+  view = uint32_t(std::min(ip * size_t(g.ntheta) + it, size_t(g.nv - 1)));
+}
+
+Stencil measured_stencil(const Grid& g, const BtfDesc& d, size_t light, size_t view) {
+  if (!g.measured()) return stencil(g, grid_coord(g, d.lights.dirs[light], d.views.dirs[view]));
+  Stencil s;
+  const int c[4] = {int(light % size_t(g.nbeta)), int(light / size_t(g.nbeta)), int(view % size_t(g.ntheta)), int(view / size_t(g.ntheta))};
+  for (int a = 0; a < 4; ++a) s.i[a][0] = s.i[a][1] = c[a], s.w[a][0] = 1, s.w[a][1] = 0;
+  return s;
+}
+
 Stencil stencil(const Grid& g, const GridCoord& c) {
   Stencil s;
   const float v[4] = {c.beta, c.alpha, c.theta, c.phi};
@@ -92,6 +121,17 @@ ResamplePlan make_plan(const BtfDesc& d, const Grid& g) {
   p.off.resize(n);
   p.w.resize(n);
   const size_t nl = d.num_lights();
+  if (g.measured()) {  // no resampling: each node is one measured value
+    p.direct = true;
+    for (size_t node = 0; node < n; ++node) {
+      uint32_t l, v;
+      node_measured(g, node, l, v);
+      p.off[node].fill(0), p.w[node].fill(0.f);
+      p.off[node][0] = uint32_t(size_t(d.channels) * (size_t(l) + nl * size_t(v)));
+      p.w[node][0] = 1;
+    }
+    return p;
+  }
 #pragma omp parallel for schedule(static)
   for (size_t node = 0; node < n; ++node) {
     size_t r = node;
@@ -116,7 +156,10 @@ void extract(const ResamplePlan& p, const float* abrdf, size_t first, size_t cou
     const auto& off = p.off[first + k];
     const auto& w = p.w[first + k];
     float rgb[3] = {0, 0, 0};
-    if (p.channels == 3) {
+    if (p.direct) {
+      const float* v = abrdf + off[0];
+      rgb[0] = v[0], rgb[1] = p.channels == 3 ? v[1] : v[0], rgb[2] = p.channels == 3 ? v[2] : v[0];
+    } else if (p.channels == 3) {
       for (int j = 0; j < 9; ++j) {
         const float* v = abrdf + off[size_t(j)];
         rgb[0] += w[size_t(j)] * v[0], rgb[1] += w[size_t(j)] * v[1], rgb[2] += w[size_t(j)] * v[2];

@@ -114,7 +114,7 @@ Result<GLuint> compile(GlObjects& o, GLenum stage, const std::string& src, const
 Result<std::string> harness_fragment(const std::string& frag, const std::string& path) {
   const size_t eol = frag.find('\n');
   if (frag.rfind("#version 300 es", 0) != 0 || eol == std::string::npos)
-    return invalid_argument(path + ": the first line must be '#version 300 es' (shader contract, formats/gpu/export.h)");
+    return invalid_argument(path + ": the first line must be '#version 300 es' (shader contract, codecs/gpu_export.h)");
   return frag.substr(0, eol + 1) + "#define BTFC_NO_MAIN\n" + frag.substr(eol + 1) +
          R"(
 // ---- tests/gl/egl_runner.cpp harness ----
