@@ -322,7 +322,8 @@ TEST(Lpyr, LaplacianMeanPolicy) {
 
 TEST(Lpyr, SaveLoadRoundTripIsExact) {
   const Btf b = synth(13, 11);
-  for (const char* spec : {"lpyr:levels=3", "lpyr:precision=float:mean=stored:laplacian_mean=keep"}) {
+  for (const char* spec : {"lpyr:levels=3", "lpyr:precision=float:mean=stored:laplacian_mean=keep", "lpyr:levels=3:precision=q",
+                           "lpyr:precision=q:bits=4:mean=stored:laplacian_mean=keep:basis_ratio=0"}) {
     auto m = encode(b, spec);
     ASSERT_TRUE(m);
     const std::string p1 = tmp_path("a.btfc"), p2 = tmp_path("b.btfc");
@@ -347,6 +348,11 @@ TEST(Lpyr, SaveLoadRoundTripIsExact) {
       EXPECT_EQ(t1->shape, t2->shape) << ti.name;
       EXPECT_TRUE(t1->bytes == t2->bytes) << ti.name;
     }
+    uint64_t tensor_bytes = 0;
+    for (const TensorInfo& t : rd->tensors()) tensor_bytes += t.size;
+    EXPECT_EQ(tensor_bytes, m->payload_bytes()) << spec;
+    auto g = (*l)->gpu_tensors();  // a quantized model exports its dequantized floats
+    EXPECT_TRUE(g.ok()) << spec << ": " << g.status().message();
     std::remove(p1.c_str()), std::remove(p2.c_str());
   }
 }
