@@ -12,6 +12,8 @@
 #include "codecs/lpca/clustering.h"
 #include "codecs/lpca/lpca.h"
 #include "codecs/lpca/sh.h"
+#include "codecs/target.h"
+#include "core/metrics.h"
 #include "core/synth.h"
 
 using namespace btfc;
@@ -578,4 +580,22 @@ TEST(Lpca, QualityOnSyntheticIsWithinTwoSidedBounds) {
   const double bound = 0.11;  // measured 0.0988
   EXPECT_LE(err, bound);
   EXPECT_GE(err, 0.75 * bound);
+}
+
+// --max-bytes over lpca's settings (budget_variants: half and precision=q at bits 4, 6, 8).
+TEST(Lpca, MaxBytesSearchesComponentsAndPrecisionWithinTheBudget) {
+  const Btf b = synth(8, 8, some_views({0, 9}));
+  auto ref = encode(b, "lpca:clusters=2:components=2");
+  ASSERT_TRUE(ref);
+  const double budget = double(ref->payload_bytes());
+  Context ctx;
+  auto any = choose_for_target(b, "lpca:clusters=2", Target{Target::Kind::max_bytes, budget}, ctx);
+  ASSERT_TRUE(any.ok()) << any.status().message();
+  EXPECT_LE(double(any->model->payload_bytes()), budget);
+  EXPECT_NE(any->variants.find("precision=q"), std::string::npos) << any->variants;
+  auto half = choose_for_target(b, "lpca:clusters=2:precision=half", Target{Target::Kind::max_bytes, budget}, ctx);
+  ASSERT_TRUE(half.ok()) << half.status().message();
+  Btf out;
+  ASSERT_TRUE(half->model->decode_all(out).ok());
+  EXPECT_GE(any->psnr, compare_btf(b, out, false).value().psnr) << any->variants;
 }
