@@ -26,7 +26,7 @@
 //    UBO2003) and N_k weights, y + 2c components. Its bases cost d / N_k times its weights,
 //    whatever the counts, and on coarse levels (N_k << d) they are nearly all its bytes while the
 //    level adds little: on synthetic 81 x 81 BTFs of 16, 48, 64, 96 texels square and on the
-//    textile, the levels with d > 64 N_k cost 25-62 % of the default payload and bought at most
+//    textile, the levels with d > 64 N_k cost 24-62 % of the paper's payload and bought at most
 //    0.5 dB (0.02 dB from 48 x 48 up; docs/benchmarks.md). Rule: lmax = the paper's stop (the
 //    first k with w_k h_k <= 2 y, capped where the level becomes 1x1) or earlier, the largest k
 //    such that every level j <= k has d <= basis_ratio N_j (its bases cost at most basis_ratio =
@@ -39,7 +39,7 @@
 //    48 x 48, 1:474 at 64 x 64, 1:724 at 96 x 96 (the paper's rule: 1:32, 1:193, 1:307, 1:550).
 //    The per-level counts stay the paper's y / c: fewer components on small levels (tried: at
 //    most one per 16..256 texels, or bases at most 1..16 x the weights) lost 0.5-8 dB and most of
-//    the SSIM for 25-130 % more ratio, worse than fmf's rank trade on the same data.
+//    the SSIM for 25-170 % more ratio, worse than fmf's rank trade on the same data.
 //    The used levels go into the model's spec (levels=0 resolved to lmax + 1). basis_ratio=0 is
 //    the paper's rule alone (64x64, y=8 -> lmax 4). `levels=n` asks for lmax = n - 1 (capped
 //    where the level becomes 1x1; the clamp is noted in the stats).
