@@ -11,8 +11,10 @@
 
 #include "codecs/lpca/clustering.h"
 #include "codecs/lpca/lpca.h"
-#include "formats/exr/envmap.h"
+#include "codecs/target.h"
+#include "core/metrics.h"
 #include "core/sh.h"
+#include "formats/exr/envmap.h"
 #include "core/synth.h"
 
 using namespace btfc;
@@ -445,7 +447,7 @@ TEST(LpcaRelight, ExrRoundTripAndEnvironmentProjection) {
 
 TEST(Lpca, SaveLoadIsExactAndCorruptionIsReported) {
   Btf b = synth(8, 8, some_views({0, 9}));
-  for (const char* prec : {"half", "float"}) {
+  for (const char* prec : {"half", "float", "q:bits=6", "q:bits=3"}) {
     auto m = encode(b, std::string("lpca:clusters=3:components=3:precision=") + prec);
     ASSERT_TRUE(m);
     const std::string path = tmp_path(std::string("m_") + prec + ".btfc");
@@ -461,7 +463,22 @@ TEST(Lpca, SaveLoadIsExactAndCorruptionIsReported) {
     uint64_t tensor_bytes = 0;
     for (const TensorInfo& t : rd->tensors()) tensor_bytes += t.size;
     EXPECT_EQ(tensor_bytes, m->payload_bytes());
-    std::remove(path.c_str());
+    // save -> load -> save: every tensor byte-identical (the loaded model keeps the coded tensors).
+    const std::string path2 = tmp_path(std::string("m2_") + prec + ".btfc");
+    ASSERT_TRUE(save_model(**m2, lpca_codec(), path2).ok());
+    auto rd2 = ContainerReader::open(path2);
+    ASSERT_TRUE(rd2.ok());
+    ASSERT_EQ(rd->tensors().size(), rd2->tensors().size());
+    for (const TensorInfo& ti : rd->tensors()) {
+      auto t1 = rd->read(ti.name), t2 = rd2->read(ti.name);
+      ASSERT_TRUE(t1.ok() && t2.ok()) << ti.name;
+      EXPECT_TRUE(t1->dtype == t2->dtype && t1->bytes == t2->bytes) << prec << " " << ti.name;
+      if (std::string(prec).rfind("q", 0) == 0) EXPECT_EQ(t1->dtype, DType::zq) << ti.name;
+    }
+    // The GPU tensors of a quantized model are its dequantized floats.
+    auto g = (*m2)->gpu_tensors();
+    ASSERT_TRUE(g.ok()) << g.status().message();
+    std::remove(path.c_str()), std::remove(path2.c_str());
   }
   auto m = encode(b, "lpca:clusters=3:components=3");
   // A model written under another BTF shape: the table no longer fits.
@@ -564,4 +581,22 @@ TEST(Lpca, QualityOnSyntheticIsWithinTwoSidedBounds) {
   const double bound = 0.11;  // measured 0.0988
   EXPECT_LE(err, bound);
   EXPECT_GE(err, 0.75 * bound);
+}
+
+// --max-bytes over lpca's settings (budget_variants: half and precision=q at bits 4, 6, 8).
+TEST(Lpca, MaxBytesSearchesComponentsAndPrecisionWithinTheBudget) {
+  const Btf b = synth(8, 8, some_views({0, 9}));
+  auto ref = encode(b, "lpca:clusters=2:components=2");
+  ASSERT_TRUE(ref);
+  const double budget = double(ref->payload_bytes());
+  Context ctx;
+  auto any = choose_for_target(b, "lpca:clusters=2", Target{Target::Kind::max_bytes, budget}, ctx);
+  ASSERT_TRUE(any.ok()) << any.status().message();
+  EXPECT_LE(double(any->model->payload_bytes()), budget);
+  EXPECT_NE(any->variants.find("precision=q"), std::string::npos) << any->variants;
+  auto half = choose_for_target(b, "lpca:clusters=2:precision=half", Target{Target::Kind::max_bytes, budget}, ctx);
+  ASSERT_TRUE(half.ok()) << half.status().message();
+  Btf out;
+  ASSERT_TRUE(half->model->decode_all(out).ok());
+  EXPECT_GE(any->psnr, compare_btf(b, out, false).value().psnr) << any->variants;
 }

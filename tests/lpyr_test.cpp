@@ -14,6 +14,8 @@
 
 #include "codecs/lpyr/lpyr.h"
 #include "codecs/lpyr/lpyr_internal.h"
+#include "codecs/target.h"
+#include "core/metrics.h"
 #include "core/synth.h"
 
 using namespace btfc;
@@ -322,7 +324,8 @@ TEST(Lpyr, LaplacianMeanPolicy) {
 
 TEST(Lpyr, SaveLoadRoundTripIsExact) {
   const Btf b = synth(13, 11);
-  for (const char* spec : {"lpyr:levels=3", "lpyr:precision=float:mean=stored:laplacian_mean=keep"}) {
+  for (const char* spec : {"lpyr:levels=3", "lpyr:precision=float:mean=stored:laplacian_mean=keep", "lpyr:levels=3:precision=q",
+                           "lpyr:precision=q:bits=4:mean=stored:laplacian_mean=keep:basis_ratio=0"}) {
     auto m = encode(b, spec);
     ASSERT_TRUE(m);
     const std::string p1 = tmp_path("a.btfc"), p2 = tmp_path("b.btfc");
@@ -347,6 +350,11 @@ TEST(Lpyr, SaveLoadRoundTripIsExact) {
       EXPECT_EQ(t1->shape, t2->shape) << ti.name;
       EXPECT_TRUE(t1->bytes == t2->bytes) << ti.name;
     }
+    uint64_t tensor_bytes = 0;
+    for (const TensorInfo& t : rd->tensors()) tensor_bytes += t.size;
+    EXPECT_EQ(tensor_bytes, m->payload_bytes()) << spec;
+    auto g = (*l)->gpu_tensors();  // a quantized model exports its dequantized floats
+    EXPECT_TRUE(g.ok()) << spec << ": " << g.status().message();
     std::remove(p1.c_str()), std::remove(p2.c_str());
   }
 }
@@ -483,4 +491,24 @@ TEST(Lpyr, QualityBoundsOnSyntheticBtf) {
   EXPECT_GE(e, 0.75 * bound);
   const double ratio = double(b.size() * 4) / double(m->payload_bytes());
   EXPECT_GT(ratio, 3.0);
+}
+
+// --max-bytes over lpyr's settings (budget_variants: half and precision=q at bits 4, 6, 8): the
+// chosen model fits, q settings were tried, and it is at least as good as the half-only search.
+TEST(Lpyr, MaxBytesSearchesYAndPrecisionWithinTheBudget) {
+  const Btf b = synth(16, 16);
+  auto ref = encode(b, "lpyr:y=4:c=1");
+  ASSERT_TRUE(ref);
+  const double budget = double(ref->payload_bytes());
+  Context ctx;
+  auto any = choose_for_target(b, "lpyr", Target{Target::Kind::max_bytes, budget}, ctx);
+  ASSERT_TRUE(any.ok()) << any.status().message();
+  EXPECT_LE(double(any->model->payload_bytes()), budget);
+  EXPECT_NE(any->variants.find("precision=q"), std::string::npos) << any->variants;
+  auto half = choose_for_target(b, "lpyr:precision=half", Target{Target::Kind::max_bytes, budget}, ctx);
+  ASSERT_TRUE(half.ok()) << half.status().message();
+  EXPECT_LE(double(half->model->payload_bytes()), budget);
+  Btf out;
+  ASSERT_TRUE(half->model->decode_all(out).ok());
+  EXPECT_GE(any->psnr, compare_btf(b, out, false).value().psnr) << any->variants;
 }

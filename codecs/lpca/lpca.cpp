@@ -11,6 +11,7 @@
 #include "codecs/lpca/lpca_model.h"
 #include "core/sh.h"
 #include "core/blas_env.h"
+#include "core/quant.h"
 
 namespace btfc {
 namespace lpca {
@@ -26,7 +27,10 @@ const ParamSpec k_params[] = {
      "clusters K of the local PCA (empty ones are dropped); 0 = from the data: texels / (64 (components + 1)), 1..32"},
     {"components", ParamSpec::Type::integer, "8", 1, 256, {}, "eigen-BRDFs c_B per cluster (besides the mean)", true},
     {"iters", ParamSpec::Type::integer, "10", 1, 1000, {}, "maximum {PCA, reassignment} iterations"},
-    {"precision", ParamSpec::Type::choice, "half", 0, 0, {"half", "float"}, "storage of the eigen-BRDF table and the weights"},
+    {"precision", ParamSpec::Type::choice, "half", 0, 0, {"half", "float", "q"},
+     "storage of the eigen-BRDF table and the weights: half / float, or q = per-component quantized integers, zstd-coded (lpca.h)"},
+    {"bits", ParamSpec::Type::integer, "8", 2, 20, {},
+     "precision=q: weight step = 2^-bits x RMS of the texels' ABRDF norms; eigen-BRDF (cluster k, component i) step / sigma_ki, mean step / sqrt(members) (equal error per value)"},
     {"sh_order", ParamSpec::Type::integer, "5", 1, sh::k_max_order, {}, "spherical-harmonic order n (n^2 coefficients) for relighting / PRT"},
 };
 
@@ -50,7 +54,30 @@ std::string resolved_spec(const std::string& canonical, int clusters) {
 }
 
 Config config_from(const Params& p) {
-  return {int(p.get_int("components")), p.get("precision") == "half", int(p.get_int("sh_order"))};
+  Config c{int(p.get_int("components")), p.get("precision") == "half", 0, int(p.get_int("sh_order"))};
+  if (p.get("precision") == "q") c.bits = int(p.get_int("bits"));
+  return c;
+}
+
+// A zq step that keeps the column's integers within +-2^29 (core/quant.h) and finite.
+float safe_step(double step, double max_abs) {
+  step = std::max(step, std::ldexp(max_abs, -29));
+  return float(std::clamp(step, 1e-30, 1e30));
+}
+
+// Per-column maximum |value| of a row-major [rows, cols] array.
+std::vector<double> column_max(const float* v, size_t rows, size_t cols) {
+  std::vector<double> mx(cols, 0.0);
+  for (size_t r = 0; r < rows; ++r)
+    for (size_t k = 0; k < cols; ++k) mx[k] = std::max(mx[k], double(std::fabs(v[r * cols + k])));
+  return mx;
+}
+
+// Cluster indices as a zq tensor [H, W, 1] of step 1 (exact integers; zstd codes them at about
+// their entropy instead of 16 bits).
+Result<Tensor> coded_clusters(const BtfDesc& d, const std::vector<uint32_t>& cl) {
+  std::vector<float> v(cl.begin(), cl.end());
+  return quant::encode("cluster", {uint64_t(d.height), uint64_t(d.width), 1}, v.data(), {1.0f}, {});
 }
 
 float round_half(float x) { return float(Imath::half(x)); }
@@ -167,6 +194,11 @@ Status LpcaModel::decode(const DecodeRequest& req, Btf& out) const {
 }
 
 Status LpcaModel::save(ContainerWriter& w) const {
+  if (m_cfg.bits > 0) {  // precision=q: the zq tensors made at encode (or read at load)
+    if (m_coded.size() != 3) return codec_error("lpca: precision=q model without its coded tensors");
+    for (const Tensor& t : m_coded) w.add_tensor(t);
+    return {};
+  }
   const int c = m_cfg.components, K = m_clusters;
   const DType dt = m_cfg.half ? DType::f16 : DType::f32;
   const uint64_t rows = m_desc.abrdf_size();
@@ -184,6 +216,11 @@ Status LpcaModel::save(ContainerWriter& w) const {
 }
 
 uint64_t LpcaModel::payload_bytes() const {
+  if (m_cfg.bits > 0) {
+    uint64_t bytes = 0;
+    for (const Tensor& t : m_coded) bytes += t.bytes.size();
+    return bytes;
+  }
   const uint64_t scalar = m_cfg.half ? 2 : 4;
   return 2 * uint64_t(m_cluster_of.size()) + scalar * uint64_t(m_table.size() + m_weights.size()) +
          4 * uint64_t(m_mean_scale.size() + m_weight_scale.size());
@@ -213,6 +250,11 @@ class LpcaCodec final : public Codec {
   const char* summary() const override { return "local PCA of ABRDFs + SH relighting / PRT, seed 002 sections 3-5"; }
   uint32_t payload_version() const override { return k_payload_version; }
   std::span<const ParamSpec> params() const override { return k_params; }
+  // --max-bytes searches the components (and with them the default cluster count) for half
+  // floats and for quantized tables / weights at three bit depths (as fmf does).
+  std::vector<std::string> budget_variants() const override {
+    return {"precision=half", "precision=q:bits=4", "precision=q:bits=6", "precision=q:bits=8"};
+  }
 
   Result<std::unique_ptr<Model>> encode(const Btf& btf, const Params& p, Context& ctx) const override {
     const BtfDesc& d = btf.desc();
@@ -244,6 +286,35 @@ class LpcaCodec final : public Codec {
         mean = mean.unaryExpr([s](float x) { return round_half(x / s) * s; });
         fit.table.middleRows(Index(k) * (c + 1) + 1, c) = fit.table.middleRows(Index(k) * (c + 1) + 1, c).unaryExpr(&round_half);
       }
+    }
+    // precision=q (lpca.h): the table as a zq tensor [rows, K (c + 1)] (one column per mean /
+    // eigen-BRDF, each with its equal-error step), then the weights re-projected onto the
+    // dequantized table, as for half.
+    ModelStats st;
+    std::vector<Tensor> coded;
+    double q_step = 0;  // the weight step D
+    if (cfg.bits > 0) {
+      q_step = std::ldexp(std::sqrt(std::max(0.0, fit.total_energy) / double(std::max<Index>(1, N))), -cfg.bits);
+      if (!(q_step > 0) || !std::isfinite(q_step)) q_step = 1;  // all-zero data: any step is exact
+      const Index R = Index(K) * (c + 1);
+      std::vector<double> members(size_t(K), 0.0), sigma2(size_t(R), 0.0);
+      for (Index t = 0; t < N; ++t) {
+        const size_t k = fit.cluster_of[size_t(t)];
+        members[k] += 1;
+        for (int i = 0; i < c; ++i) sigma2[k * size_t(c + 1) + 1 + size_t(i)] += double(fit.weights(t, i)) * fit.weights(t, i);
+      }
+      for (int k = 0; k < K; ++k) sigma2[size_t(k) * size_t(c + 1)] = members[size_t(k)];  // the mean's weight is 1 per member
+      Eigen::MatrixXf Tc = fit.table;  // column-major R x dim = row-major [dim, R]
+      const std::vector<double> mx = column_max(Tc.data(), size_t(dim), size_t(R));
+      std::vector<float> steps(static_cast<size_t>(R));
+      for (Index r = 0; r < R; ++r) {
+        const double sg = std::sqrt(sigma2[size_t(r)]);
+        steps[size_t(r)] = safe_step(sg > 0 ? std::min(4.0, q_step / sg) : 4.0, mx[size_t(r)]);
+      }
+      std::vector<float> deq;
+      BTFC_ASSIGN_OR_RETURN(Tensor tt, quant::encode("table", {uint64_t(dim), uint64_t(R)}, Tc.data(), steps, {}, 19, &deq));
+      fit.table = Eigen::Map<Eigen::MatrixXf>(deq.data(), R, dim);
+      coded.push_back(std::move(tt));
     }
     const Eigen::Map<const Eigen::MatrixXf> X(btf.data(), dim, N);
     double err = 0;
@@ -278,8 +349,20 @@ class LpcaCodec final : public Codec {
           fit.weights(t, i) = round_half(fit.weights(t, i) / s) * s;
         }
     }
+    if (cfg.bits > 0) {
+      const std::vector<double> mx = column_max(fit.weights.data(), size_t(N), size_t(c));
+      std::vector<float> steps(static_cast<size_t>(c));
+      for (int i = 0; i < c; ++i) steps[size_t(i)] = safe_step(q_step, mx[size_t(i)]);
+      std::vector<float> deq;
+      BTFC_ASSIGN_OR_RETURN(Tensor wt, quant::encode("weights", {uint64_t(d.height), uint64_t(d.width), uint64_t(c)}, fit.weights.data(),
+                                                     steps, {}, 19, &deq));
+      fit.weights = Eigen::Map<MatrixXfR>(deq.data(), N, c);
+      BTFC_ASSIGN_OR_RETURN(Tensor ct, coded_clusters(d, fit.cluster_of));
+      coded.insert(coded.begin(), std::move(ct));
+      coded.push_back(std::move(wt));
+      st.add("q.weight_step", q_step);
+    }
 
-    ModelStats st;
     st.add("clusters_requested", double(fo.clusters));
     st.add("clusters_used", double(K));
     st.add("components", double(c));
@@ -297,6 +380,7 @@ class LpcaCodec final : public Codec {
       st.note("clusters", std::to_string(fo.clusters - K) + " of " + std::to_string(fo.clusters) + " clusters stayed empty (fewer texels than clusters)");
     auto model = std::make_unique<LpcaModel>(d, resolved_spec(p.canonical(), fo.clusters), cfg, std::move(fit.cluster_of), std::move(fit.table), std::move(fit.weights),
                                              std::move(mean_scale), std::move(weight_scale));
+    model->set_coded(std::move(coded));
     st.add("encode_seconds", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     model->mutable_stats() = std::move(st);
     return std::unique_ptr<Model>(std::move(model));
@@ -313,6 +397,7 @@ class LpcaCodec final : public Codec {
     const BtfDesc& d = rd.desc();
     if (d.channels > 64) return corrupt_data(path + ": lpca with more than 64 channels");
     const int c = cfg.components;
+    if (cfg.bits > 0) return load_q(rd, p, cfg);
     const TensorInfo* ti = rd.find("table");
     if (!ti || ti->shape.size() != 3) return corrupt_data(path + ": lpca tensor 'table' missing or not 3-D");
     const uint64_t K = ti->shape[0];
@@ -346,6 +431,42 @@ class LpcaCodec final : public Codec {
     for (Index t = 0; t < Wt.rows(); ++t)
       for (int i = 0; i < c; ++i) Wt(t, i) *= ws[size_t(cluster_of[size_t(t)]) * size_t(c) + size_t(i)];
     auto model = std::make_unique<LpcaModel>(d, p.canonical(), cfg, std::move(cluster_of), std::move(T), std::move(Wt), std::move(ms), std::move(ws));
+    model->mutable_stats().add("clusters_used", double(K));
+    model->mutable_stats().add("components", double(c));
+    return std::unique_ptr<Model>(std::move(model));
+  }
+
+ private:
+  // precision=q: cluster zq [H, W, 1], table zq [rows, K (c + 1)], weights zq [H, W, c].
+  static Result<std::unique_ptr<Model>> load_q(const ContainerReader& rd, const Params& p, const Config& cfg) {
+    const std::string& path = rd.path();
+    const BtfDesc& d = rd.desc();
+    const int c = cfg.components;
+    const uint64_t rows = d.abrdf_size(), H = uint64_t(d.height), W = uint64_t(d.width);
+    const TensorInfo* ti = rd.find("table");
+    if (!ti || ti->shape.size() != 2 || ti->shape[0] != rows || ti->shape[1] % uint64_t(c + 1) != 0)
+      return corrupt_data(path + ": lpca tensor 'table' missing or not [" + std::to_string(rows) + ", K (c + 1)]");
+    const uint64_t K = ti->shape[1] / uint64_t(c + 1);
+    if (K == 0 || K > uint64_t(p.get_int("clusters") > 0 ? p.get_int("clusters") : 4096))
+      return corrupt_data(path + ": lpca tensor 'table' has " + std::to_string(K) + " clusters (spec allows 1.." + std::to_string(p.get_int("clusters")) + ")");
+    BTFC_ASSIGN_OR_RETURN(Tensor table_t, rd.read_checked("table", DType::zq, {rows, K * uint64_t(c + 1)}));
+    BTFC_ASSIGN_OR_RETURN(Tensor cluster_t, rd.read_checked("cluster", DType::zq, {H, W, 1}));
+    BTFC_ASSIGN_OR_RETURN(Tensor w_t, rd.read_checked("weights", DType::zq, {H, W, uint64_t(c)}));
+    const std::string at = path + ": chunk TNSR '";
+    BTFC_ASSIGN_OR_RETURN(std::vector<float> table, quant::decode(table_t, at + "table'"));
+    BTFC_ASSIGN_OR_RETURN(std::vector<float> cl, quant::decode(cluster_t, at + "cluster'"));
+    BTFC_ASSIGN_OR_RETURN(std::vector<float> wv, quant::decode(w_t, at + "weights'"));
+    std::vector<uint32_t> cluster_of(cl.size());
+    for (size_t i = 0; i < cl.size(); ++i) {
+      if (!(cl[i] >= 0 && cl[i] < float(K)) || cl[i] != std::floor(cl[i]))
+        return corrupt_data(path + ": lpca tensor 'cluster' holds " + std::to_string(cl[i]) + ", not an index below " + std::to_string(K) + " clusters");
+      cluster_of[i] = uint32_t(cl[i]);
+    }
+    MatrixXfR T = Eigen::Map<Eigen::MatrixXf>(table.data(), Index(K) * (c + 1), Index(rows));
+    MatrixXfR Wt = Eigen::Map<MatrixXfR>(wv.data(), Index(H * W), c);
+    std::vector<float> ms(size_t(K), 1.f), ws(size_t(K) * size_t(c), 1.f);
+    auto model = std::make_unique<LpcaModel>(d, p.canonical(), cfg, std::move(cluster_of), std::move(T), std::move(Wt), std::move(ms), std::move(ws));
+    model->set_coded({std::move(cluster_t), std::move(table_t), std::move(w_t)});
     model->mutable_stats().add("clusters_used", double(K));
     model->mutable_stats().add("components", double(c));
     return std::unique_ptr<Model>(std::move(model));

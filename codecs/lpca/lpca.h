@@ -22,6 +22,22 @@
 //   weights       [H, W, c]       f16|f32  PCA weights / weight_scale[k(x), i]
 //   weight_scale  [K, c]          f32      max |weight| per (cluster, component) (1 for float)
 // Half storage cannot overflow whatever the HDR range: every stored value is within [-1, 1].
+// precision=q ("bits where they matter", same payload version; the spec says which layout):
+//   cluster       [H, W, 1]       zq       the cluster index, step 1 (exact; zstd codes its entropy)
+//   table         [rows, K (c+1)] zq       column k (c+1) + m = cluster k's mean (m = 0) or
+//                                          eigen-BRDF m, each column with its own step
+//   weights       [H, W, c]       zq       PCA weights, one step D for every column
+// (no scale tensors). Steps, equal squared error per stored value (the rate-distortion optimum
+// at high rate, as fmf's precision=q, codecs/fmf/fmf_quant.h): a texel is
+// mean_k + sum_i w_i E_ki with orthonormal E_ki, so rounding a weight with step D adds D^2 / 12
+// to ||B - B~||^2, rounding an entry of E_ki with step d adds d^2 / 12 sigma_ki^2 (sigma_ki^2 =
+// sum of w_i^2 over the cluster's members) and one of the mean adds d^2 / 12 n_k (n_k members).
+// Hence weight step D, eigen-BRDF step D / sigma_ki (at most 4: a component without energy
+// rounds to zero), mean step D / sqrt(n_k), with D = 2^-bits x the RMS over texels of the
+// ABRDF norm ||B_x|| (so `bits` is about the bit depth of the strongest weight, as fmf's bits;
+// every setting follows the data's scale). The table is quantized first and the weights are
+// projected onto the dequantized table, so they absorb its rounding. The model holds the
+// dequantized values: in memory it equals the file bit for bit, and exports read floats.
 // The SH coefficients are derived from the table at load (cheap: K(c+1) x views x lights x n^2),
 // so they cost no storage; sh_order only sets their order.
 //

@@ -13,6 +13,7 @@ namespace btfc::lpca {
 struct Config {
   int components = 8;  // c per cluster
   bool half = true;    // storage of table and weights
+  int bits = 0;        // precision=q: > 0, the bit depth of the equal-error steps (lpca.h)
   int sh_order = 5;    // n: n*n SH coefficients per (row of the table, view, channel)
 };
 
@@ -50,6 +51,8 @@ class LpcaModel final : public Model {
   const DirectionInterpolator& view_interp() const { return m_view_interp; }
   // PRT tensors for a fixed lighting (attach_environment in lpca.h); returned by gpu_tensors().
   void set_prt(std::vector<Tensor> t) { m_prt = std::move(t); }
+  // precision=q: the zq tensors cluster, table, weights as saved (their values are the model's).
+  void set_coded(std::vector<Tensor> t) { m_coded = std::move(t); }
 
  private:
   BtfDesc m_desc;
@@ -63,6 +66,7 @@ class LpcaModel final : public Model {
   std::vector<float> m_eigen_sh;
   DirectionInterpolator m_light_interp, m_view_interp;
   std::vector<Tensor> m_prt;
+  std::vector<Tensor> m_coded;
   ModelStats m_stats;
 };
 

@@ -19,12 +19,15 @@ constexpr double k_laplacian_mean_fraction = 1e-2;  // auto: keep a Laplacian me
 constexpr double k_phong_tolerance = 0.1;           // auto: Phong when |mu_Y - phong| / |mu_Y| <= this
 
 const ParamSpec k_params[] = {
-    {"levels", ParamSpec::Type::integer, "0", 0, 24, {}, "pyramid levels lmax + 1 (1 = plain PCA); 0 = auto (paper: stop at ~2 y texels)"},
+    {"levels", ParamSpec::Type::integer, "0", 0, 24, {}, "pyramid levels lmax + 1 (1 = plain PCA); 0 = from the data: the paper's stop at ~2 y texels, and no level whose bases cost more than basis_ratio x its weights"},
     {"y", ParamSpec::Type::integer, "8", 1, 4096, {}, "PCA components of Y per level", true},
     {"c", ParamSpec::Type::integer, "2", 1, 4096, {}, "PCA components of Cb and of Cr per level"},
+    {"basis_ratio", ParamSpec::Type::integer, "64", 0, 1 << 20, {}, "levels=0: a level of N_k texels is made only when its bases (directions per component) cost at most basis_ratio x its weights (N_k per component); 0 = the paper's rule alone"},
     {"mean", ParamSpec::Type::choice, "auto", 0, 0, {"auto", "phong", "stored"}, "top-level mean: Phong fit (+ Cb/Cr constants), stored vectors, or auto (Phong unless its relative residual > 0.1)"},
     {"laplacian_mean", ParamSpec::Type::choice, "auto", 0, 0, {"auto", "keep", "drop"}, "means of Laplacian levels: auto keeps one carrying > 1 % of its level's energy"},
-    {"precision", ParamSpec::Type::choice, "half", 0, 0, {"half", "float"}, "storage of eigen-vectors and weights (means and Phong are f32)"},
+    {"precision", ParamSpec::Type::choice, "half", 0, 0, {"half", "float", "q"},
+     "storage of eigen-vectors and weights (means and Phong f32); q = per-component quantized integers, zstd-coded, stored means too (lpyr.h)"},
+    {"bits", ParamSpec::Type::integer, "8", 2, 20, {}, "precision=q: step of the weights = 2^-bits x RMS of the texels' ABRDF norms / sqrt(their gain in the decoded RGB values); eigen-vector j's step / ||D_j|| (equal error per value)"},
 };
 
 std::string level_key(int k, int c, const char* what) { return "level" + std::to_string(k) + "." + k_channel_names[c] + "." + what; }
@@ -38,7 +41,13 @@ struct Encoder {
   // PCA of the d x n matrix m (texel-major buffer, modified). `center` (d) is subtracted first
   // when given and becomes the block's mean; for Laplacian levels `policy` decides whether the
   // measured mean is kept.
-  Result<Block> pca(float* m, size_t d, size_t n, int comps, const std::string& policy, const float* center, int k, int c) {
+  // precision=q: the steps' reference D (lpyr.h) and the RGB gain of each channel.
+  double q_ref = 0;
+  double gain[3] = {1, 1, 1};
+  size_t n0 = 1;
+
+  Result<Block> pca(float* m, size_t d, size_t n, int comps, const std::string& policy, const float* center, int k, int c,
+                    bool store_center = false) {
     Eigen::Map<Eigen::MatrixXf> M(m, Index(d), Index(n));
     double total = 0;
     Eigen::VectorXd sum = Eigen::VectorXd::Zero(Index(d));
@@ -66,6 +75,16 @@ struct Encoder {
       stats.add(level_key(k, c, "mean_fraction"), frac);
       if (policy == "keep" || (policy == "auto" && frac > k_laplacian_mean_fraction)) mean = mu.cast<float>();
     }
+    const bool q = q_ref > 0;
+    Block b;
+    // The mean first (a kept Laplacian mean or a stored top mean): the PCA then absorbs its rounding.
+    // It is added to the level's n texels, each covering n0 / n level-0 texels: error per entry
+    // x n0 x gain.
+    if (q && mean.size() && (center ? store_center : true)) {
+      b.mean = std::move(mean);
+      BTFC_RETURN_IF_ERROR(quantize_mean_q(b, k, c, q_ref / std::sqrt(double(n0) * gain[c])));
+      mean = b.mean;
+    }
     if (mean.size()) {
 #pragma omp parallel for schedule(static)
       for (Index t = 0; t < Index(n); ++t) M.col(t) -= mean;
@@ -84,8 +103,12 @@ struct Encoder {
     stats.add(level_key(k, c, "residual"), std::sqrt(resid));  // Frobenius norm of the PCA error
     stats.add(level_key(k, c, "components"), double(r.U.cols()));
     stats.add(level_key(k, c, "pca_seconds"), std::chrono::duration<double>(std::chrono::steady_clock::now() - t_svd).count());
-    Block b{std::move(r.U), std::move(r.SxV), {}, std::move(mean)};
-    quantize(b, p.get("precision") == "half");
+    b.E = std::move(r.U), b.D = std::move(r.SxV), b.mean = std::move(mean);
+    if (q) {
+      BTFC_RETURN_IF_ERROR(quantize_q(b, k, c, q_ref / std::sqrt(double(n0) / double(n) * gain[c])));
+    } else {
+      quantize(b, p.get("precision") == "half");
+    }
     return b;
   }
 
@@ -93,7 +116,9 @@ struct Encoder {
     const BtfDesc& d = btf.desc();
     const auto t_start = std::chrono::steady_clock::now();
     const int ycomp = int(p.get_int("y")), ccomp = int(p.get_int("c"));
+    const int basis_ratio = int(p.get_int("basis_ratio"));
     int lmax = auto_lmax(d.width, d.height, ycomp);
+    if (basis_ratio > 0) lmax = std::min(lmax, bytes_lmax(d.width, d.height, d.num_images(), basis_ratio));
     if (p.get_int("levels") > 0) {
       const int want = int(p.get_int("levels")) - 1, cap = max_lmax(d.width, d.height);
       lmax = std::min(want, cap);
@@ -105,6 +130,22 @@ struct Encoder {
     std::vector<Level> levels(size_t(lmax) + 1);
     for (int k = 0; k <= lmax; ++k) levels[size_t(k)].size = sizes[size_t(k)];
     stats.add("lmax", lmax);
+    auto comps_at = [&](int, int c) { return c == k_y ? ycomp : ccomp; };
+    n0 = d.num_texels();
+    if (p.get("precision") == "q") {
+      double e = 0;
+#pragma omp parallel for reduction(+ : e) schedule(static)
+      for (size_t i = 0; i < d.num_values(); ++i) e += double(btf.data()[i]) * btf.data()[i];
+      q_ref = std::ldexp(std::sqrt(e / double(std::max<size_t>(1, n0))), -int(p.get_int("bits")));
+      if (!(q_ref > 0) || !std::isfinite(q_ref)) q_ref = 1;  // all-zero data: any step is exact
+      for (int c = 0; c < 3; ++c) {  // squared RGB change per unit change of channel c
+        float unit[3] = {0, 0, 0}, rgb[3];
+        unit[c] = 1;
+        ycbcr_to_rgb(unit, rgb);
+        gain[c] = double(rgb[0]) * rgb[0] + double(rgb[1]) * rgb[1] + double(rgb[2]) * rgb[2];
+      }
+      stats.add("q.reference_step", q_ref);
+    }
 
     const size_t dd = d.num_images(), n0 = d.num_texels();
     const std::string lap_policy = p.get("laplacian_mean"), mean_mode = p.get("mean");
@@ -125,8 +166,8 @@ struct Encoder {
           o[r] = ycc[c];
         }
       }
-      const int comps = c == k_y ? ycomp : ccomp;
       for (int k = 0; k < lmax; ++k) {
+        const int comps = comps_at(k, c);
         const LevelSize s = sizes[size_t(k)];
         next.assign(sizes[size_t(k) + 1].texels() * dd, 0.0f);
         BTFC_RETURN_IF_ERROR(reduce_any(f.data(), s.w, s.h, dd, next.data()));  // lpyr_cl.h: kernel or reference
@@ -171,14 +212,18 @@ struct Encoder {
       } else {
         for (size_t r = 0; r < dd; ++r) center(Index(r)) = float(mu[r]);
       }
-      BTFC_ASSIGN_OR_RETURN(Block b, pca(f.data(), dd, nt, comps, "", center.data(), lmax, c));
+      BTFC_ASSIGN_OR_RETURN(Block b, pca(f.data(), dd, nt, comps_at(lmax, c), "", center.data(), lmax, c, !phong));
       levels[size_t(lmax)].mean_stored[c] = !phong;
       levels[size_t(lmax)].ch[c] = std::move(b);
     }
     f = {}, next = {};
     stats.add("encode_seconds", std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count());
-    Config cfg{p.get("precision") == "half"};
-    auto model = std::make_unique<LpyrModel>(d, p.canonical(), cfg, std::move(levels), phong, ph, chroma);
+    Config cfg{p.get("precision") == "half", p.get("precision") == "q" ? int(p.get_int("bits")) : 0};
+    // The spec records the levels used (levels=0 resolved, as lpca's clusters=0).
+    std::string spec = p.canonical();
+    if (const size_t at = spec.find(":levels=0:"); at != std::string::npos)
+      spec = spec.substr(0, at) + ":levels=" + std::to_string(lmax + 1) + spec.substr(at + 9);
+    auto model = std::make_unique<LpyrModel>(d, spec, cfg, std::move(levels), phong, ph, chroma);
     ModelStats& ms = model->mutable_stats();
     ms.numbers.insert(ms.numbers.begin(), stats.numbers.begin(), stats.numbers.end());
     ms.notes.insert(ms.notes.begin(), stats.notes.begin(), stats.notes.end());
@@ -194,6 +239,10 @@ class LpyrCodec final : public Codec {
   }
   uint32_t payload_version() const override { return k_payload_version; }
   std::span<const ParamSpec> params() const override { return k_params; }
+  // --max-bytes searches y for half floats and for quantized payloads at three bit depths.
+  std::vector<std::string> budget_variants() const override {
+    return {"precision=half", "precision=q:bits=4", "precision=q:bits=6", "precision=q:bits=8"};
+  }
 
   Result<std::unique_ptr<Model>> encode(const Btf& btf, const Params& p, Context& ctx) const override {
     const BtfDesc& d = btf.desc();

@@ -21,10 +21,28 @@
 //    even coordinates; up-sampling is nearest neighbour, texel (x, y) of level k reads
 //    (x / 2, y / 2) of level k + 1 (the extra last row/column is cropped). So level k of any
 //    level-0 texel is (x >> k, y >> k). 1x1 BTFs have lmax = 0 (plain PCA with mean).
-//  - Levels (`levels=0`): the paper's stop rule, lmax = the first k with w_k h_k <= 2 y (as many
-//    texels as about twice the Y components; 64x64, y=8 -> lmax 4 as in the paper), capped where
-//    the level becomes 1x1. `levels=n` asks for lmax = n - 1 (clamped the same way; the clamp
-//    is noted in the stats).
+//  - Levels from the data (`levels=0`; issue 22 "defaults that fit the data"). Bytes: level k
+//    of N_k = w_k h_k texels stores per PCA component a basis of d values (d = nL nV, 6561 for
+//    UBO2003) and N_k weights, y + 2c components. Its bases cost d / N_k times its weights,
+//    whatever the counts, and on coarse levels (N_k << d) they are nearly all its bytes while the
+//    level adds little: on synthetic 81 x 81 BTFs of 16, 48, 64, 96 texels square and on the
+//    textile, the levels with d > 64 N_k cost 24-62 % of the paper's payload and bought at most
+//    0.5 dB (0.02 dB from 48 x 48 up; docs/benchmarks.md). Rule: lmax = the paper's stop (the
+//    first k with w_k h_k <= 2 y, capped where the level becomes 1x1) or earlier, the largest k
+//    such that every level j <= k has d <= basis_ratio N_j (its bases cost at most basis_ratio =
+//    64 times its weights); 0 when level 0 already fails. 81 x 81 directions: the top level has
+//    >= 103 texels (64 x 64 -> lmax 2 where the paper has 4; 16 x 16 -> plain PCA); a single
+//    view (d = 81) keeps the paper's levels. Ratio (float32 raw, 12 N_0 d bytes): the bases are
+//    2 (lmax + 1) (y + 2c) d bytes, i.e. 1:(N_0 / (2 (lmax + 1))) at 8 / 2 / 2, the weights add
+//    1:2460 and a stored mean 1:N_0 per channel (f32), so any full 81 x 81 BTF of 48 x 48 texels
+//    or more (lmax <= log4(N_0 / 103) + 1) stays above 1:200; measured 1:83 at 16 x 16, 1:291 at
+//    48 x 48, 1:474 at 64 x 64, 1:724 at 96 x 96 (the paper's rule: 1:32, 1:193, 1:307, 1:550).
+//    The per-level counts stay the paper's y / c: fewer components on small levels (tried: at
+//    most one per 16..256 texels, or bases at most 1..16 x the weights) lost 0.5-8 dB and most of
+//    the SSIM for 25-170 % more ratio, worse than fmf's rank trade on the same data.
+//    The used levels go into the model's spec (levels=0 resolved to lmax + 1). basis_ratio=0 is
+//    the paper's rule alone (64x64, y=8 -> lmax 4). `levels=n` asks for lmax = n - 1 (capped
+//    where the level becomes 1x1; the clamp is noted in the stats).
 //  - PCA per level and channel: fmf's truncated SVD (core/svd.h) of the d x N_k matrix
 //    (d = nL nV directions, N_k texels): exact Gram eigen-decomposition on the small side when
 //    min(d, N_k) <= 256, else randomized range finder (GEMM passes; 16 oversampling columns,
@@ -49,6 +67,19 @@
 //   scale.<k>.<ch> f32 [C]
 //   mean.<k>.<ch>  f32 [d]         only when its flag is set
 //   phong         f32 [6]          ka, kd, ks, alpha, Cb constant, Cr constant (Phong top only)
+// precision=q (same payload version; the spec says which): E.<k>.<ch> and D.<k>.<ch> are zq
+// tensors (core/quant.h) of the same shapes, mean.<k>.<ch> a zq [d, 1], no scale tensors.
+// Steps, equal squared error per stored value in the decoded RGB BTF at lod 0 (as fmf's
+// precision=q, codecs/fmf/fmf_quant.h): level k's texel covers n_0 / N_k level-0 texels, and a
+// unit change of channel ch changes RGB by a squared amount g_ch (the inverse YCbCr matrix's
+// column: 3 for Y, about 3.26 for Cb and 2.47 for Cr). E has orthonormal columns, so a weight
+// rounded with step e adds e^2 / 12 x n_0 / N_k x g_ch; an entry of E_j with step s adds
+// s^2 / 12 x ||D_j||^2 n_0 / N_k g_ch; a mean entry with step m adds m^2 / 12 x n_0 g_ch. With
+// R = 2^-bits x the RMS over texels of the RGB ABRDF norm (`bits` about the bit depth of the
+// strongest weight, as fmf's bits):
+//   D step  e = R / sqrt(g_ch n_0 / N_k),  E_j step e / ||D_j|| (at most 4),  mean step R / sqrt(g_ch n_0).
+// Means are quantized before their level's PCA (which absorbs their rounding); Phong stays f32.
+// The model holds the dequantized values (in memory = file), so exports read floats.
 //
 // GPU tensors (paper section 3.3; need y <= 8 and c <= 2, missing components are zero):
 //   eigen_map      f32 [(lmax+1) nV, 3 nL, 4]: RGBA texel (row k nV + v, column j nL + l) holds
@@ -69,8 +100,9 @@
 //   A renderer evaluates eq. 7 with D from weight_map at (p >> k) in level k's slots, E from
 //   eigen_map at the LUT's (l, v), adds w_k mean_map (or Phong for the top), then YCbCr -> RGB.
 //
-// Parameters: levels (0 auto), y (8), c (2), mean (auto|phong|stored), laplacian_mean
-// (auto|keep|drop), precision (half|float). See the table in lpyr.cpp for ranges.
+// Parameters: levels (0 auto), y (8), c (2), basis_ratio (64), mean (auto|phong|stored),
+// laplacian_mean (auto|keep|drop), precision (half|float|q), bits (8). See the table in lpyr.cpp
+// for ranges.
 #pragma once
 #include "codecs/codec.h"
 

@@ -36,6 +36,10 @@ int max_lmax(int width, int height);
 // The paper's stopping rule: the smallest k whose level has <= 2 * components texels
 // ("about as many Laplacian BRDFs as components"), capped by max_lmax.
 int auto_lmax(int width, int height, int components);
+// Levels from the bytes (lpyr.h "Levels from the data"): the largest k (capped by max_lmax)
+// such that every level j <= k has d <= ratio * N_j (its bases, d values per component, cost at
+// most `ratio` times its weights, N_j per component); 0 when even level 0 fails.
+int bytes_lmax(int width, int height, size_t d, int ratio);
 
 // The pyramid operators on texel-major stacks: `d` floats per texel (one value per (light, view)
 // pair of one channel), texel t = x + w * y. All images of a level are filtered at once, so the
@@ -83,6 +87,7 @@ struct Block {
   MatrixXfR D;           // N_k x C PCA weights, dequantized
   Eigen::VectorXf scale; // C, per-component storage scale of D
   Eigen::VectorXf mean;  // d or empty
+  std::vector<Tensor> coded;  // precision=q: zq tensors E.<k>.<ch>, D.<k>.<ch> [, mean.<k>.<ch>] as saved
 };
 struct Level {
   LevelSize size;
@@ -92,6 +97,7 @@ struct Level {
 
 struct Config {
   bool half = true;
+  int bits = 0;  // precision=q: > 0
 };
 
 class LpyrModel final : public Model {
@@ -146,6 +152,14 @@ Eigen::VectorXf phong_mean(const BtfDesc& d, const Phong& p, float chroma[2], in
 // Rounds a block to its storage precision (E to half, D per component scaled to |x| <= 1 then
 // half), so the in-memory model is exactly what the file holds.
 void quantize(Block& b, bool half);
+
+// precision=q (lpyr.h): E and D of level k, channel c as zq tensors (stored in b.coded; E and D
+// become their dequantized values), D's step `step` for every column, E column j's step
+// step / ||D_j|| (at most 4).
+Status quantize_q(Block& b, int k, int c, double step);
+// A mean vector of level k, channel c as a zq tensor [d, 1] of step `step` (appended to
+// b.coded; b.mean becomes its dequantized value).
+Status quantize_mean_q(Block& b, int k, int c, double step);
 
 constexpr uint32_t k_payload_version = 1;
 constexpr uint32_t k_flag_phong = 8;  // "levels" tensor flags: bit c = mean of channel c stored

@@ -7,6 +7,7 @@
 
 #include "codecs/lpyr/lpyr_internal.h"
 #include "core/fixed_product.h"
+#include "core/quant.h"
 
 namespace btfc::lpyr {
 
@@ -33,6 +34,43 @@ void quantize(Block& b, bool half) {
     const float s = b.scale(c);
     b.D.col(c) = b.D.col(c).unaryExpr([&](float x) { return round_half(x / s) * s; });
   }
+}
+
+namespace {
+float safe_step(double step, double max_abs) {  // integers within +-2^29 (core/quant.h), finite
+  step = std::max(step, std::ldexp(max_abs, -29));
+  return float(std::clamp(step, 1e-30, 1e30));
+}
+std::string tname(const char* what, int k, int c) { return std::string(what) + "." + std::to_string(k) + "." + k_channel_names[c]; }
+}  // namespace
+
+Status quantize_q(Block& b, int k, int c, double step) {
+  const Index C = b.E.cols();
+  std::vector<float> es(static_cast<size_t>(C)), ds(static_cast<size_t>(C));
+  for (Index j = 0; j < C; ++j) {
+    const double sigma = b.D.col(j).cast<double>().norm();
+    const double emax = b.E.rows() ? double(b.E.col(j).cwiseAbs().maxCoeff()) : 0.0;
+    const double dmax = b.D.rows() ? double(b.D.col(j).cwiseAbs().maxCoeff()) : 0.0;
+    es[size_t(j)] = safe_step(sigma > 0 ? std::min(4.0, step / sigma) : 4.0, emax);
+    ds[size_t(j)] = safe_step(step, dmax);
+  }
+  std::vector<float> deq;
+  BTFC_ASSIGN_OR_RETURN(Tensor te, quant::encode(tname("E", k, c), {uint64_t(b.E.rows()), uint64_t(C)}, b.E.data(), es, {}, 19, &deq));
+  b.E = Eigen::Map<MatrixXfR>(deq.data(), b.E.rows(), C);
+  BTFC_ASSIGN_OR_RETURN(Tensor td, quant::encode(tname("D", k, c), {uint64_t(b.D.rows()), uint64_t(C)}, b.D.data(), ds, {}, 19, &deq));
+  b.D = Eigen::Map<MatrixXfR>(deq.data(), b.D.rows(), C);
+  b.scale = Eigen::VectorXf::Ones(C);
+  b.coded.insert(b.coded.begin(), {std::move(te), std::move(td)});
+  return {};
+}
+
+Status quantize_mean_q(Block& b, int k, int c, double step) {
+  const double mx = b.mean.size() ? double(b.mean.cwiseAbs().maxCoeff()) : 0.0;
+  std::vector<float> deq;
+  BTFC_ASSIGN_OR_RETURN(Tensor t, quant::encode(tname("mean", k, c), {uint64_t(b.mean.size()), 1}, b.mean.data(), {safe_step(step, mx)}, {}, 19, &deq));
+  b.mean = Eigen::Map<Eigen::VectorXf>(deq.data(), Index(deq.size()));
+  b.coded.push_back(std::move(t));
+  return {};
 }
 
 LpyrModel::LpyrModel(BtfDesc desc, std::string spec, Config cfg, std::vector<Level> levels, bool phong, Phong ph, float chroma[2])
@@ -184,7 +222,6 @@ void put_matrix(ContainerWriter& w, const std::string& name, const MatrixXfR& m,
   }
   w.add_tensor(std::move(t));
 }
-std::string tname(const char* what, int k, int c) { return std::string(what) + "." + std::to_string(k) + "." + k_channel_names[c]; }
 }  // namespace
 
 Status LpyrModel::save(ContainerWriter& w) const {
@@ -201,6 +238,11 @@ Status LpyrModel::save(ContainerWriter& w) const {
     for (int c = 0; c < 3; ++c) {
       const Level& lv = m_levels[size_t(k)];
       const Block& b = lv.ch[c];
+      if (m_cfg.bits > 0) {  // precision=q: the zq tensors (E, D, the stored mean)
+        if (b.coded.size() != 2u + (lv.mean_stored[c] ? 1u : 0u)) return codec_error("lpyr: precision=q block without its coded tensors");
+        for (const Tensor& t : b.coded) w.add_tensor(t);
+        continue;
+      }
       put_matrix(w, tname("E", k, c), b.E, m_cfg.half);
       put_matrix(w, tname("D", k, c), b.D * b.scale.cwiseInverse().asDiagonal(), m_cfg.half);
       w.add_tensor(Tensor::from_f32(tname("scale", k, c), {uint64_t(b.scale.size())}, b.scale.data()));
@@ -219,6 +261,10 @@ uint64_t LpyrModel::payload_bytes() const {
   for (const Level& lv : m_levels)
     for (int c = 0; c < 3; ++c) {
       const Block& b = lv.ch[c];
+      if (m_cfg.bits > 0) {
+        for (const Tensor& t : b.coded) bytes += t.bytes.size();
+        continue;
+      }
       bytes += scalar * uint64_t(b.E.size() + b.D.size()) + 4 * uint64_t(b.scale.size());
       if (lv.mean_stored[c]) bytes += 4 * uint64_t(b.mean.size());
     }
@@ -239,7 +285,9 @@ Result<std::unique_ptr<Model>> LpyrModel::load(const ContainerReader& rd, Params
   const std::vector<LevelSize> sizes = level_sizes(d.width, d.height, lmax);
   const uint64_t dd = d.num_images();
   const bool half = p.get("precision") == "half";
-  const DType dt = half ? DType::f16 : DType::f32;
+  const int bits = p.get("precision") == "q" ? int(p.get_int("bits")) : 0;
+  const DType dt = bits > 0 ? DType::zq : half ? DType::f16 : DType::f32;
+  const std::string at = rd.path() + ": chunk TNSR '";
   std::vector<Level> levels(size_t(lmax) + 1);
   bool phong = false;
   for (int k = 0; k <= lmax; ++k) {
@@ -260,10 +308,16 @@ Result<std::unique_ptr<Model>> LpyrModel::load(const ContainerReader& rd, Params
       if (C == 0 || C > 4096 || C > dd) return bad("level " + std::to_string(k) + " channel " + k_channel_names[c] + " has " + std::to_string(C) + " components");
       BTFC_ASSIGN_OR_RETURN(Tensor E, rd.read_checked(tname("E", k, c), dt, {dd, C}));
       BTFC_ASSIGN_OR_RETURN(Tensor D, rd.read_checked(tname("D", k, c), dt, {uint64_t(lv.size.texels()), C}));
-      BTFC_ASSIGN_OR_RETURN(Tensor S, rd.read_checked(tname("scale", k, c), DType::f32, {C}));
-      BTFC_ASSIGN_OR_RETURN(std::vector<float> e, E.to_f32());
-      BTFC_ASSIGN_OR_RETURN(std::vector<float> dv, D.to_f32());
-      BTFC_ASSIGN_OR_RETURN(std::vector<float> s, S.to_f32());
+      std::vector<float> e, dv, s(static_cast<size_t>(C), 1.0f);
+      if (bits > 0) {
+        BTFC_ASSIGN_OR_RETURN(e, quant::decode(E, at + E.name + "'"));
+        BTFC_ASSIGN_OR_RETURN(dv, quant::decode(D, at + D.name + "'"));
+      } else {
+        BTFC_ASSIGN_OR_RETURN(Tensor S, rd.read_checked(tname("scale", k, c), DType::f32, {C}));
+        BTFC_ASSIGN_OR_RETURN(e, E.to_f32());
+        BTFC_ASSIGN_OR_RETURN(dv, D.to_f32());
+        BTFC_ASSIGN_OR_RETURN(s, S.to_f32());
+      }
       Block& b = lv.ch[c];
       b.E = Eigen::Map<MatrixXfR>(e.data(), Index(dd), Index(C));
       b.D = Eigen::Map<MatrixXfR>(dv.data(), Index(lv.size.texels()), Index(C));
@@ -271,11 +325,19 @@ Result<std::unique_ptr<Model>> LpyrModel::load(const ContainerReader& rd, Params
       for (Index i = 0; i < b.scale.size(); ++i)
         if (!std::isfinite(b.scale(i)) || b.scale(i) <= 0) return bad("tensor '" + tname("scale", k, c) + "' holds a non-positive or non-finite scale");
       if (!b.E.allFinite() || !b.D.allFinite()) return bad("level " + std::to_string(k) + " channel " + k_channel_names[c] + " holds non-finite values");
-      b.D = b.D * b.scale.asDiagonal();
+      if (bits == 0) b.D = b.D * b.scale.asDiagonal();
+      else b.coded = {std::move(E), std::move(D)};
       lv.mean_stored[c] = flags & (1u << c);
       if (lv.mean_stored[c]) {
-        BTFC_ASSIGN_OR_RETURN(Tensor M, rd.read_checked(tname("mean", k, c), DType::f32, {dd}));
-        BTFC_ASSIGN_OR_RETURN(std::vector<float> m, M.to_f32());
+        std::vector<float> m;
+        if (bits > 0) {
+          BTFC_ASSIGN_OR_RETURN(Tensor M, rd.read_checked(tname("mean", k, c), DType::zq, {dd, 1}));
+          BTFC_ASSIGN_OR_RETURN(m, quant::decode(M, at + M.name + "'"));
+          b.coded.push_back(std::move(M));
+        } else {
+          BTFC_ASSIGN_OR_RETURN(Tensor M, rd.read_checked(tname("mean", k, c), DType::f32, {dd}));
+          BTFC_ASSIGN_OR_RETURN(m, M.to_f32());
+        }
         b.mean = Eigen::Map<Eigen::VectorXf>(m.data(), Index(dd));
         if (!b.mean.allFinite()) return bad("tensor '" + tname("mean", k, c) + "' holds non-finite values");
       } else if (rd.find(tname("mean", k, c))) {
@@ -294,7 +356,7 @@ Result<std::unique_ptr<Model>> LpyrModel::load(const ContainerReader& rd, Params
     ph = {v[0], v[1], v[2], v[3]};
     chroma[0] = v[4], chroma[1] = v[5];
   }
-  auto model = std::make_unique<LpyrModel>(d, p.canonical(), Config{half}, std::move(levels), phong, ph, chroma);
+  auto model = std::make_unique<LpyrModel>(d, p.canonical(), Config{half, bits}, std::move(levels), phong, ph, chroma);
   model->mutable_stats().add("lmax", lmax);
   model->mutable_stats().note("mean", phong ? "phong" : "stored");
   return std::unique_ptr<Model>(std::move(model));

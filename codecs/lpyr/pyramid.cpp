@@ -58,6 +58,14 @@ int auto_lmax(int width, int height, int components) {
   return k;
 }
 
+int bytes_lmax(int width, int height, size_t d, int ratio) {
+  const int cap = max_lmax(width, height);
+  int k = 0;
+  size_t w = size_t(width), h = size_t(height);
+  while (k < cap && d <= size_t(ratio) * (((w + 1) / 2) * ((h + 1) / 2))) w = (w + 1) / 2, h = (h + 1) / 2, ++k;
+  return k;
+}
+
 void reduce(const float* src, int w, int h, size_t d, float* dst) {
   const int w2 = (w + 1) / 2, h2 = (h + 1) / 2;
   const long long n2 = (long long)w2 * h2;

@@ -48,6 +48,14 @@ const Btf& textile_crop() {
 bool have_data() { return std::filesystem::exists(std::string(BTFC_DATA_DIR) + "/textile_lurex_utia64/README.md") ||
                           std::filesystem::exists(std::string(BTFC_DATA_DIR) + "/textile_lurex_utia64"); }
 
+// `b` encoded with the mlvq spec `text`.
+Result<std::unique_ptr<Model>> encode(const Btf& b, const std::string& text) {
+  BTFC_ASSIGN_OR_RETURN(auto spec, parse_spec_string(text));
+  BTFC_ASSIGN_OR_RETURN(Params p, bind_params(spec, mlvq_codec().params()));
+  Context ctx;
+  return mlvq_codec().encode(b, p, ctx);
+}
+
 double stat(const Model& m, const std::string& key) {
   for (const auto& [k, v] : m.stats().numbers)
     if (k == key) return v;
@@ -65,13 +73,8 @@ TEST(MlvqTextile, GridLayoutCropIsBoundedByItsResampling) {
   ASSERT_TRUE(have_data()) << "../shared/data/textile_lurex_utia64 is missing";
   const Btf& b = textile_crop();
   // The paper's grid layout (small grid) with the previous defaults: what bounds its quality.
-  auto spec = parse_spec_string("mlvq:scheme=4:phi=8:theta=4:alpha=7:beta=7:ssim4=0.9:ssim3=0.9:ssim2=0.95:ssim1=0.98:chroma=1:"
-                                "value_bits=0:scale_bits=16:noise=off");
-  ASSERT_TRUE(spec.ok());
-  auto p = bind_params(*spec, mlvq_codec().params());
-  ASSERT_TRUE(p.ok());
-  Context ctx;
-  auto m = mlvq_codec().encode(b, *p, ctx);
+  auto m = encode(b, "mlvq:scheme=4:phi=8:theta=4:alpha=7:beta=7:ssim4=0.9:ssim3=0.9:ssim2=0.95:ssim1=0.98:chroma=1:"
+                     "value_bits=0:scale_bits=16:noise=off");
   ASSERT_TRUE(m.ok()) << m.status().message();
   Btf out;
   ASSERT_TRUE(m.value()->decode_all(out).ok());
@@ -114,12 +117,7 @@ TEST(MlvqTextile, NoiseCeilingsOfTheTextileAreMeasuredAndBindOnlyWhenBelowTheThr
   // 1 - ceiling is the noise's SSIM loss: two-sided on level 1 (the shortest vectors, lowest ceiling).
   in_band(1 - c.lum[1], 0.18, "1 - luminance noise ceiling at level 1");
   // noise=auto caps the thresholds at the ceilings.
-  auto spec = parse_spec_string("mlvq:scheme=4:phi=8:theta=4:alpha=7:beta=7:noise=auto:ssim1=0.999:ssim4=0.9");
-  ASSERT_TRUE(spec.ok());
-  auto p = bind_params(*spec, mlvq_codec().params());
-  ASSERT_TRUE(p.ok());
-  Context ctx;
-  auto m = mlvq_codec().encode(b, *p, ctx);
+  auto m = encode(b, "mlvq:scheme=4:phi=8:theta=4:alpha=7:beta=7:noise=auto:ssim1=0.999:ssim4=0.9");
   ASSERT_TRUE(m.ok()) << m.status().message();
   EXPECT_NEAR(stat(*m.value(), "threshold.lum1"), std::max(c.lum[1], 0.999 - 0.2), 1e-9);
   EXPECT_NEAR(stat(*m.value(), "threshold.lum4"), std::min(0.9, c.lum[4]), 1e-9);
@@ -135,12 +133,7 @@ constexpr double BOUND_NOISE = 0.14, BOUND_REL = 0.42, BOUND_SSIM = 0.52, BOUND_
 TEST(MlvqTextile, DefaultOnACropHasMeasuredQualityRatioAndNoiseThreshold) {
   ASSERT_TRUE(have_data()) << "../shared/data/textile_lurex_utia64 is missing";
   const Btf b = crop(16, 16, 16);
-  auto spec = parse_spec_string("mlvq");
-  ASSERT_TRUE(spec.ok());
-  auto p = bind_params(*spec, mlvq_codec().params());
-  ASSERT_TRUE(p.ok());
-  Context ctx;
-  auto m = mlvq_codec().encode(b, *p, ctx);
+  auto m = encode(b, "mlvq");
   ASSERT_TRUE(m.ok()) << m.status().message();
   Btf out;
   ASSERT_TRUE(m.value()->decode_all(out).ok());
