@@ -32,6 +32,20 @@ OutOfCoreResult::~OutOfCoreResult() {
   }
 }
 
+OutOfCoreResult& OutOfCoreResult::operator=(OutOfCoreResult&& o) noexcept {
+  if (this == &o) return *this;
+  if (!temp_work.empty() && temp_work != o.temp_work) {
+    std::error_code ec;
+    std::filesystem::remove(temp_work, ec);
+  }
+  codec = o.codec, params = std::move(o.params), desc = std::move(o.desc), model = std::move(o.model);
+  sizing = std::move(o.sizing), in_place = o.in_place, work = std::move(o.work);
+  chunks = o.chunks, chunk_texels = o.chunk_texels, stats = std::move(o.stats), factorize_seconds = o.factorize_seconds;
+  temp_work = std::move(o.temp_work);
+  o.temp_work.clear();
+  return *this;
+}
+
 std::string streaming_codec_names() {
   std::string s;
   for (const Codec* c : all_codecs())

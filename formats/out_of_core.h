@@ -35,8 +35,9 @@ struct OutOfCoreJob {
 
 struct OutOfCoreResult {
   OutOfCoreResult() = default;
-  OutOfCoreResult(OutOfCoreResult&&) = default;
-  OutOfCoreResult& operator=(OutOfCoreResult&&) = default;
+  // Moves hand the working file over: only one object removes it.
+  OutOfCoreResult(OutOfCoreResult&& o) noexcept { *this = std::move(o); }
+  OutOfCoreResult& operator=(OutOfCoreResult&& o) noexcept;
   ~OutOfCoreResult();      // removes an automatic working file (process 0)
 
   const Codec* codec = nullptr;

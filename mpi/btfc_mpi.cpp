@@ -113,7 +113,9 @@ int run(int argc, char** argv, MpiCollective& coll) {
   // the library's (formats/out_of_core.h), the same call `btfc compress --max-memory` makes.
   Progress progress(a.quiet || a.json || !root);
   OutOfCoreJob job;
-  job.input = a.in, job.spec = a.spec, job.max_bytes = *limit, job.seed = a.seed, job.work_file = a.work_file;
+  std::string note;  // the output's writer may adapt the spec (a Bonn DFMF holds only colour model 11's offset)
+  job.input = a.in, job.spec = spec_for_output(a.spec, a.out, &note), job.max_bytes = *limit, job.seed = a.seed, job.work_file = a.work_file;
+  if (!note.empty() && root && !a.quiet && !a.json) std::cerr << "note: " << a.out << ": " << note << "\n";
   std::error_code ec;
   job.temp_dir = std::filesystem::absolute(a.out, ec).parent_path().string();
   job.progress = &progress;
