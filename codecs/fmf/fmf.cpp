@@ -705,7 +705,8 @@ Result<std::unique_ptr<Model>> make_fmf_model(const BtfDesc& desc, int cm, std::
     blocks.push_back(std::move(b));
   }
   std::string text = per_channel ? "rank=" + std::to_string(blocks[0].U.cols()) + ":chroma_rank=" +
-                                       std::to_string(std::max(blocks[1].U.cols(), blocks[2].U.cols())) + ":color=dfmf"
+                                       std::to_string(std::max(blocks[1].U.cols(), blocks[2].U.cols())) + ":color=dfmf:offset=" +
+                                       std::to_string(k_drr_eps)  // the file's luminance offset (colour model 11's), not "automatic"
                                  : "rank=" + std::to_string(blocks[0].U.cols()) + ":color=rgb";
   text += half ? ":precision=half" : ":precision=float";
   BTFC_ASSIGN_OR_RETURN(auto spec, parse_spec_string("fmf:" + text));
