@@ -93,8 +93,7 @@ bool compress_streamed(const Global& g, const CompressArgs& a, const BtfDesc& in
   const std::filesystem::path parent = std::filesystem::absolute(a.out, ec).parent_path();
   if (auto r = resolve_spec(a.spec); r.ok() && !r->first->streaming())
     return code = fail(g, invalid_argument(a.in + ": the BTF (" + format_bytes(desc->num_values() * 4) + " as float32) does not fit in --max-memory " +
-                                           format_bytes(*limit) + "; " + r->first->name() + " needs it in memory (" + streaming_codec_names() +
-                                           " compress" + (streaming_codec_names().find(',') == std::string::npos ? "es" : "") + " out of core)")),
+                                           format_bytes(*limit) + "; " + r->first->name() + " needs it in memory (" + only_streaming_codecs() + ")")),
            true;
   auto model = encode_streamed(g, a.in, a.spec, a.work_file, parent.string(), *limit, a.seed, report, ooc);
   if (!model.ok()) return code = fail(g, model.status()), true;

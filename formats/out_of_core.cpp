@@ -46,20 +46,13 @@ OutOfCoreResult& OutOfCoreResult::operator=(OutOfCoreResult&& o) noexcept {
   return *this;
 }
 
-std::string streaming_codec_names() {
-  std::string s;
+std::string only_streaming_codecs() {
+  std::string names;
   for (const Codec* c : all_codecs())
-    if (c->streaming()) s += (s.empty() ? "" : ", ") + std::string(c->name());
-  return s;
-}
-
-namespace {
-std::string only_streaming() {
-  const std::string names = streaming_codec_names();
+    if (c->streaming()) names += (names.empty() ? "" : ", ") + std::string(c->name());
   return names.empty() ? "no codec compresses out of core"
                        : "only " + names + (names.find(',') == std::string::npos ? " compresses" : " compress") + " out of core";
 }
-}  // namespace
 
 Result<OutOfCoreResult> compress_out_of_core(const OutOfCoreJob& job, Collective& coll) {
   const bool root = coll.rank() == 0;
@@ -70,7 +63,7 @@ Result<OutOfCoreResult> compress_out_of_core(const OutOfCoreJob& job, Collective
     BTFC_ASSIGN_OR_RETURN(auto resolved, resolve_spec(job.spec));
     r.codec = resolved.first, r.params = std::move(resolved.second);
     if (!r.codec->streaming())
-      return invalid_argument(job.input + ": " + r.codec->name() + " needs the BTF in memory; " + only_streaming());
+      return invalid_argument(job.input + ": " + r.codec->name() + " needs the BTF in memory; " + only_streaming_codecs());
     return {};
   }();
   BTFC_RETURN_IF_ERROR(coll.agree(s));
@@ -91,6 +84,7 @@ Result<OutOfCoreResult> compress_out_of_core(const OutOfCoreJob& job, Collective
       // The whole limit scaled by bytes_per_value / 12: the fixed part keeps its margin too.
       raw_lines = stream_lines_per_chunk(d.value(), plan.value(), limit / k_in_place_bytes_per_value * plan->bytes_per_value);
       r.desc = d.value();
+      r.sizing = plan.value();  // in place only when every process got here (the vote below)
     }
   }
   double votes = raw_lines > 0 ? 1.0 : 0.0;
@@ -152,11 +146,6 @@ Result<OutOfCoreResult> compress_out_of_core(const OutOfCoreJob& job, Collective
     return {};
   }();
   BTFC_RETURN_IF_ERROR(coll.agree(s));
-  if (r.in_place) {
-    auto plan = enc.plan(r.params, r.desc, limit);
-    BTFC_RETURN_IF_ERROR(coll.agree(plan.status()));
-    r.sizing = plan.value();
-  }
   r.chunks = src->num_chunks(), r.chunk_texels = src->chunk_count(0);
 
   Context ctx;

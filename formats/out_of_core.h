@@ -53,8 +53,8 @@ struct OutOfCoreResult {
   std::string temp_work;   // an automatic working file to remove
 };
 
-// The codecs whose registry entries stream, comma-separated (for error messages).
-std::string streaming_codec_names();
+// "only fmf compresses out of core": the registry's codecs that stream, for error messages.
+std::string only_streaming_codecs();
 
 Result<OutOfCoreResult> compress_out_of_core(const OutOfCoreJob& job, Collective& coll);
 

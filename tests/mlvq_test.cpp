@@ -78,6 +78,20 @@ const std::string k_small = "mlvq:phi=8:theta=4:alpha=7:beta=7";
 
 // ---- Huffman ---------------------------------------------------------------------------------
 
+// At a measured (light, view): eval, eval_dir at its directions and eval_batch's `batch` (3
+// floats) agree with the decode `d`.
+static void expect_measured_agree(const Model& m, const Btf& d, const EvalQuery& q, const float* batch) {
+  float e[3], ed[3];
+  m.eval(q.x, q.y, q.light, q.view, e);
+  ASSERT_TRUE(m.eval_dir(q.x, q.y, d.desc().lights.dirs[size_t(q.light)], d.desc().views.dirs[size_t(q.view)], ed).ok());
+  for (int c = 0; c < 3; ++c) {
+    const float want = d.at(size_t(q.x), size_t(q.y), size_t(q.light), size_t(q.view), size_t(c));
+    EXPECT_NEAR(e[c], want, 1e-5f * (1 + std::fabs(want)));
+    EXPECT_NEAR(ed[c], want, 1e-4f * (1 + std::fabs(want)));
+    EXPECT_NEAR(batch[c], want, 1e-5f * (1 + std::fabs(want)));
+  }
+}
+
 TEST(MlvqHuffman, RandomStreamsRoundTripAndNeverExceedPlainPlusFlag) {
   std::mt19937 rng(7);
   for (uint32_t alphabet : {1u, 2u, 3u, 17u, 256u, 1000u, 70000u}) {
@@ -279,17 +293,7 @@ TEST(MlvqQuality, DefaultEncodingErrorAndEvalConsistency) {
   for (int i = 0; i < 50; ++i) q.push_back({i % 8, (i / 8) % 8, (i * 7) % 81, (i * 13) % 81, {}, {}});
   std::vector<float> out(3 * q.size());
   ASSERT_TRUE(m->eval_batch(q, out.data()).ok());
-  for (size_t i = 0; i < q.size(); ++i) {
-    float e[3], ed[3];
-    m->eval(q[i].x, q[i].y, q[i].light, q[i].view, e);
-    ASSERT_TRUE(m->eval_dir(q[i].x, q[i].y, b.desc().lights.dirs[size_t(q[i].light)], b.desc().views.dirs[size_t(q[i].view)], ed).ok());
-    for (int c = 0; c < 3; ++c) {
-      const float want = d.at(size_t(q[i].x), size_t(q[i].y), size_t(q[i].light), size_t(q[i].view), size_t(c));
-      EXPECT_NEAR(e[c], want, 1e-5f * (1 + std::fabs(want)));
-      EXPECT_NEAR(ed[c], want, 1e-4f * (1 + std::fabs(want)));
-      EXPECT_NEAR(out[3 * i + size_t(c)], want, 1e-5f * (1 + std::fabs(want)));
-    }
-  }
+  for (size_t i = 0; i < q.size(); ++i) expect_measured_agree(*m, d, q[i], &out[3 * i]);
 }
 
 TEST(MlvqQuality, BestSchemeIsTheSmallestOfTheFour) {
@@ -557,16 +561,9 @@ TEST(MlvqMeasured, NoResamplingErrorAndEvalPathsAgree) {
   std::vector<float> out(3 * q.size());
   ASSERT_TRUE(m->eval_batch(q, out.data()).ok());
   for (size_t i = 0; i < q.size(); ++i) {
-    float e[3], ed[3];
+    float ed[3];
     if (q[i].light >= 0) {
-      m->eval(q[i].x, q[i].y, q[i].light, q[i].view, e);
-      ASSERT_TRUE(m->eval_dir(q[i].x, q[i].y, b.desc().lights.dirs[size_t(q[i].light)], b.desc().views.dirs[size_t(q[i].view)], ed).ok());
-      for (int c = 0; c < 3; ++c) {
-        const float want = d.at(size_t(q[i].x), size_t(q[i].y), size_t(q[i].light), size_t(q[i].view), size_t(c));
-        EXPECT_NEAR(e[c], want, 1e-5f * (1 + std::fabs(want)));
-        EXPECT_NEAR(ed[c], want, 1e-4f * (1 + std::fabs(want)));
-        EXPECT_NEAR(out[3 * i + size_t(c)], want, 1e-5f * (1 + std::fabs(want)));
-      }
+      expect_measured_agree(*m, d, q[i], &out[3 * i]);
     } else {
       ASSERT_TRUE(m->eval_dir(q[i].x, q[i].y, q[i].wl, q[i].wv, ed).ok());
       for (int c = 0; c < 3; ++c) EXPECT_NEAR(out[3 * i + size_t(c)], ed[c], 1e-4f * (1 + std::fabs(ed[c])));
