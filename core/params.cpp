@@ -117,4 +117,16 @@ std::string describe_params(std::span<const ParamSpec> table) {
   return os.str();
 }
 
+Result<Params> with_value(const Params& p, const std::string& key, const std::string& value, std::span<const ParamSpec> table) {
+  BTFC_ASSIGN_OR_RETURN(SpecString spec, parse_spec_string(p.canonical()));
+  bool placed = false;
+  for (auto& [k, v] : spec.values)
+    if (k == key) v = value, placed = true;
+  if (!placed) spec.values.emplace_back(key, value);
+  std::string text = spec.codec;
+  for (const auto& [k, v] : spec.values) text += ":" + k + "=" + v;
+  BTFC_ASSIGN_OR_RETURN(SpecString again, parse_spec_string(text));
+  return bind_params(again, table);
+}
+
 }  // namespace btfc

@@ -55,6 +55,11 @@ class Params {
 
 Result<Params> bind_params(const SpecString& spec, std::span<const ParamSpec> table);
 
+// `p` with `key` set to `value` (re-bound, so the value is checked against the table and the
+// key counts as set): how a codec records the value it used when it differs from the one asked
+// for (a rank clamped to the data's size, an offset taken from the data).
+Result<Params> with_value(const Params& p, const std::string& key, const std::string& value, std::span<const ParamSpec> table);
+
 // One line per parameter: "  rank  int [1, 4096] default 32  -- help".
 std::string describe_params(std::span<const ParamSpec> table);
 

@@ -1,53 +1,17 @@
-// fmf codec and model; see fmf.h for the paper, the colour modes and the stored tensors.
-#include "codecs/fmf/fmf.h"
-
+// fmf codec: parameters, encode and load; see fmf.h for the paper, the colour modes and the
+// stored tensors, fmf_model.h for how the files of this folder divide the work.
 #include <Eigen/Core>
 #include <Imath/half.h>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 
-#include <mutex>
-
-#include "codecs/fmf/fmf_cl.h"
-#include "codecs/fmf/fmf_quant.h"
+#include "codecs/fmf/fmf_model.h"
 #include "codecs/fmf/ooc_fmf.h"
-#include "core/svd.h"
-#include "core/fixed_product.h"
-#include "core/cl_runtime.h"
-#include "core/interp.h"
 #include "core/quant.h"
 
 namespace btfc {
-namespace {
-
-using Eigen::Index;
-
-constexpr uint32_t k_payload_version = 1;
-constexpr float k_drr_eps = 1e-5f;  // Bonn's dynamic-range-reduction epsilon (not stored in DFMF files)
-
-// YUV as Bonn's colour models 1/11 (formats.md 2.2): RGB = M YUV with
-// M = [1 0 1.13983; 1 -0.39465 -0.5806; 1 2.03211 0]. The forward matrix is M's exact inverse
-// (computed, not the rounded textbook YUV coefficients, which would cost 1e-5 relative error).
-constexpr float k_rgb_from_yuv[3][3] = {{1, 0, 1.13983f}, {1, -0.39465f, -0.5806f}, {1, 2.03211f, 0}};
-
-struct YuvFromRgb {
-  float m[3][3];
-  YuvFromRgb() {
-    double a[3][3];
-    for (int i = 0; i < 3; ++i)
-      for (int j = 0; j < 3; ++j) a[i][j] = k_rgb_from_yuv[i][j];
-    const double det = a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0]) +
-                       a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]);
-    for (int i = 0; i < 3; ++i)
-      for (int j = 0; j < 3; ++j) {  // adjugate / det
-        const int r0 = (j + 1) % 3, r1 = (j + 2) % 3, c0 = (i + 1) % 3, c1 = (i + 2) % 3;
-        m[i][j] = float((a[r0][c0] * a[r1][c1] - a[r0][c1] * a[r1][c0]) / det);
-      }
-  }
-};
-const YuvFromRgb k_yuv;
+namespace fmf {
 
 const ParamSpec k_params[] = {
     {"rank", ParamSpec::Type::integer, "32", 1, 4096, {}, "components C kept (upper bound when target_error is set)", true},
@@ -64,31 +28,7 @@ const ParamSpec k_params[] = {
     {"offset", ParamSpec::Type::real, "0", 0, 1e30, {}, "color=dfmf: luminance offset e of Y' = log(Y + e), U' = U / (Y + e); 0 = from the data (sum Y^2 / sum Y); 1e-5 = Bonn's colour model 11 exactly"},
 };
 
-struct Block {
-  std::string name;
-  MatrixXfR U;        // rows x C
-  MatrixXfR SxV;      // texels x C, dequantized (scale applied)
-  Eigen::VectorXf S;  // C
-  Eigen::VectorXf scale;
-  std::vector<Tensor> coded;  // precision=q: the zq tensors U.<b>, SxV.<b> as saved (fmf_quant.h)
-};
-
-struct Config {
-  bool dfmf = false;
-  bool half = true;
-  fmf::QuantConfig quant;  // precision=q (quant.bits > 0)
-  // Bonn colour model of a model made from a Bonn file (make_fmf_model), when it is not the
-  // mode's native one (dfmf: 11, rgb: 0); -1 = native. Non-native models decode on the CPU path
-  // only and cannot be saved to .btfc.
-  int color_model = -1;
-  // color=dfmf: the luminance offset e (Y' = log(Y + e), U' = U / (Y + e)); Bonn's model 11 is 1e-5.
-  float offset = k_drr_eps;
-  float color_mean[3] = {0, 0, 0};
-  float color_transform[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
-};
-
-// Inverse of Bonn colour models other than 11 (BTFLIB undecorrelate.m, formats.md 2.2).
-void bonn_undecorrelate(const Config& cfg, const float* in, float* rgb);
+std::span<const ParamSpec> params_table() { return k_params; }
 
 // A spec's offset 0 is "from the data" at encode; a model's spec holds the resolved value, so 0
 // there is a file from before the parameter existed: Bonn's 1e-5.
@@ -102,296 +42,7 @@ Config config_from(const Params& p) {
   return c;
 }
 
-class FmfModel final : public Model {
- public:
-  FmfModel(BtfDesc desc, std::string spec, Config cfg, std::vector<Block> blocks)
-      : m_desc(std::move(desc)), m_spec(std::move(spec)), m_cfg(cfg), m_blocks(std::move(blocks)),
-        m_light_interp(m_desc.lights), m_view_interp(m_desc.views) {
-    if (m_cfg.quant.bits > 0)
-      for (Block& b : m_blocks)
-        if (b.coded.empty()) quantize_block(b);
-  }
-
-  const BtfDesc& desc() const override { return m_desc; }
-  const std::string& spec() const override { return m_spec; }
-  ModelStats& mutable_stats() { return m_stats; }
-  const std::vector<Block>& blocks() const { return m_blocks; }
-  const Config& config() const { return m_cfg; }
-
-  void eval(int x, int y, int l, int v, float* out) const override {
-    const Index t = Index(x) + Index(m_desc.width) * y;
-    if (!m_cfg.dfmf) {
-      const Block& b = m_blocks[0];
-      for (int c = 0; c < m_desc.channels; ++c)
-        out[c] = b.U.row(Index(m_desc.row(l, v, c))).dot(b.SxV.row(t));
-      if (m_cfg.color_model == 12)  // Bonn FMF dynamic range reduction
-        for (int c = 0; c < m_desc.channels; ++c) out[c] = std::exp(out[c]) - k_drr_eps;
-      return;
-    }
-    const Index r = Index(l) + Index(m_desc.num_lights()) * v;
-    float yuv[3];
-    for (int k = 0; k < 3; ++k) yuv[k] = m_blocks[k].U.row(r).dot(m_blocks[k].SxV.row(t));
-    undecorrelate(yuv, out);
-  }
-
-  Status eval_dir(int x, int y, const Vec3& wl, const Vec3& wv, float* out) const override {
-    if (x < 0 || y < 0 || x >= m_desc.width || y >= m_desc.height)
-      return invalid_argument("texel (" + std::to_string(x) + ", " + std::to_string(y) + ") outside the BTF");
-    DirWeights a = m_light_interp.weights(wl), b = m_view_interp.weights(wv);
-    float acc[64] = {0}, tmp[64];
-    for (int i = 0; i < 3; ++i)
-      for (int j = 0; j < 3; ++j) {
-        const float w = a.weight[i] * b.weight[j];
-        if (w == 0) continue;
-        eval(x, y, a.index[i], b.index[j], tmp);
-        for (int c = 0; c < m_desc.channels; ++c) acc[c] += w * tmp[c];
-      }
-    for (int c = 0; c < m_desc.channels; ++c) out[c] = acc[c];
-    return {};
-  }
-
-  Status decode(const DecodeRequest& req, Btf& out) const override;
-  Status eval_batch(std::span<const EvalQuery> q, float* out) const override;
-  Status save(ContainerWriter& w) const override;
-  uint64_t payload_bytes() const override {
-    uint64_t bytes = 0, scalar = m_cfg.half ? 2 : 4;
-    for (const Block& b : m_blocks) {
-      if (!b.coded.empty()) {
-        for (const Tensor& t : b.coded) bytes += t.bytes.size();
-        bytes += 8 * uint64_t(b.S.size());
-        continue;
-      }
-      bytes += scalar * uint64_t(b.U.size() + b.SxV.size()) + 8 * uint64_t(b.S.size());
-    }
-    return bytes;
-  }
-  ModelStats stats() const override { return m_stats; }
-
- private:
-  void undecorrelate(const float* ylog_u_v, float* rgb) const {
-    if (m_cfg.color_model >= 0) return bonn_undecorrelate(m_cfg, ylog_u_v, rgb);
-    const float e = m_cfg.offset, y = std::exp(ylog_u_v[0]) - e;
-    const float yuv[3] = {y, ylog_u_v[1] * (y + e), ylog_u_v[2] * (y + e)};
-    for (int c = 0; c < 3; ++c)
-      rgb[c] = k_rgb_from_yuv[c][0] * yuv[0] + k_rgb_from_yuv[c][1] * yuv[1] + k_rgb_from_yuv[c][2] * yuv[2];
-  }
-
-  // The OpenCL kernels (kernels/fmf.cl) hard-code Bonn's offset 1e-5: other dfmf offsets decode
-  // on the CPU path.
-  bool native_eps() const { return !m_cfg.dfmf || m_cfg.offset == k_drr_eps; }
-
-  // precision=q: U and SxV become their zq tensors and the values those decode to
-  // (codecs/fmf/fmf_quant.h); the eigen-textures are width x height images for textures=dct.
-  void quantize_block(Block& b) {
-    fmf::QuantizedFactors q = fmf::quantize_factors(b.name, b.U, b.SxV, m_cfg.quant, m_desc.width, m_desc.height);
-    if (!q.status.ok()) m_quant_status = q.status;
-    b.U = std::move(q.U), b.SxV = std::move(q.SxV), b.coded = std::move(q.coded);
-    b.scale = Eigen::VectorXf::Ones(b.SxV.cols());
-  }
-  Status m_quant_status;  // a failed quantize_block: save() reports it
-
-  // The factors in the OpenCL kernels' layout (codecs/fmf/fmf_cl.h), uploaded on first use.
-  Result<std::shared_ptr<fmf_cl::DeviceFactors>> device_factors() const;
-  fmf_cl::PackedFactors packed() const;
-  Status decode_cl(const ResolvedRequest& rr, Btf& out) const;
-
-  BtfDesc m_desc;
-  std::string m_spec;
-  Config m_cfg;
-  std::vector<Block> m_blocks;
-  DirectionInterpolator m_light_interp, m_view_interp;
-  ModelStats m_stats;
-  mutable std::mutex m_cl_mutex;
-  mutable std::shared_ptr<fmf_cl::DeviceFactors> m_cl;
-};
-
-fmf_cl::PackedFactors FmfModel::packed() const {
-  fmf_cl::PackedFactors f;
-  f.mode = m_cfg.dfmf ? BTFC_FMF_DFMF : BTFC_FMF_RGB;
-  f.blocks = int(m_blocks.size());
-  for (const Block& b : m_blocks) f.C = std::max(f.C, int(b.U.cols()));
-  f.rows_per_block = int(m_blocks[0].U.rows());
-  f.texels = int(m_desc.num_texels());
-  f.nL = int(m_desc.num_lights());
-  f.nV = int(m_desc.num_views());
-  // Blocks with fewer components (dfmf chroma) are zero-padded to the common C.
-  f.U.assign(size_t(f.blocks) * f.rows_per_block * f.C, 0.0f);
-  f.SxV.assign(size_t(f.blocks) * f.texels * f.C, 0.0f);
-  for (int k = 0; k < f.blocks; ++k) {
-    const Block& b = m_blocks[size_t(k)];
-    for (Index r = 0; r < b.U.rows(); ++r)
-      for (Index c = 0; c < b.U.cols(); ++c) f.U[(size_t(k) * f.rows_per_block + size_t(r)) * f.C + size_t(c)] = b.U(r, c);
-    for (Index t = 0; t < b.SxV.rows(); ++t)
-      for (Index c = 0; c < b.SxV.cols(); ++c) f.SxV[(size_t(k) * f.texels + size_t(t)) * f.C + size_t(c)] = b.SxV(t, c);
-  }
-  return f;
-}
-
-Result<std::shared_ptr<fmf_cl::DeviceFactors>> FmfModel::device_factors() const {
-  std::lock_guard<std::mutex> lock(m_cl_mutex);
-  if (!m_cl) {
-    BTFC_ASSIGN_OR_RETURN(m_cl, fmf_cl::DeviceFactors::upload(packed()));
-  }
-  return m_cl;
-}
-
-Status FmfModel::decode_cl(const ResolvedRequest& rr, Btf& out) const {
-  BTFC_ASSIGN_OR_RETURN(auto dev, device_factors());
-  std::vector<int> texels(rr.desc.num_texels());
-  for (size_t i = 0; i < texels.size(); ++i)
-    texels[i] = int((rr.x0 + i % size_t(rr.desc.width)) + size_t(m_desc.width) * (rr.y0 + i / size_t(rr.desc.width)));
-  return dev->decode(texels, rr.lights, rr.views, out.data());
-}
-
-Status FmfModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
-  if (m_desc.channels != 3 || m_cfg.color_model >= 0 || !native_eps() || !ocl::use_opencl()) return Model::eval_batch(q, out);
-  // Validate through the reference path's checks, then convert to the kernel's query layout:
-  // directions become 3 + 3 (index, weight) pairs (the renderer's index / weight textures).
-  std::vector<btfc_fmf_query> kq(q.size());
-  for (size_t i = 0; i < q.size(); ++i) {
-    const EvalQuery& e = q[i];
-    if (e.x < 0 || e.y < 0 || e.x >= m_desc.width || e.y >= m_desc.height || (e.light >= 0) != (e.view >= 0) ||
-        (e.light >= 0 && (size_t(e.light) >= m_desc.num_lights() || size_t(e.view) >= m_desc.num_views())))
-      return Model::eval_batch(q, out);  // the reference reports the bad query
-  }
-  // A query with the same directions as its predecessor in its block (a frame's texels under one
-  // light and view) reuses its weights: the Delaunay lookups would cost more than the evaluation.
-  const size_t qb = 4096;
-#pragma omp parallel for schedule(static)
-  for (size_t b0 = 0; b0 < q.size(); b0 += qb)
-    for (size_t i = b0; i < std::min(q.size(), b0 + qb); ++i) {
-      const EvalQuery& e = q[i];
-      btfc_fmf_query& k = kq[i];
-      if (i > b0 && e.light < 0 && q[i - 1].light < 0 && std::memcmp(&e.wl, &q[i - 1].wl, sizeof(Vec3)) == 0 &&
-          std::memcmp(&e.wv, &q[i - 1].wv, sizeof(Vec3)) == 0) {
-        k = kq[i - 1];
-        k.texel = e.x + m_desc.width * e.y;
-        continue;
-      }
-      k.texel = e.x + m_desc.width * e.y;
-      DirWeights a, b;
-      if (e.light >= 0) a.index = {e.light, e.light, e.light}, b.index = {e.view, e.view, e.view};
-      else a = m_light_interp.weights(e.wl), b = m_view_interp.weights(e.wv);
-      for (int j = 0; j < 3; ++j) k.light[j] = a.index[j], k.view[j] = b.index[j], k.wl[j] = a.weight[j], k.wv[j] = b.weight[j];
-    }
-  // Runs of queries sharing a direction pair go through the blended-rows kernel (fmf_cl.h).
-  Status s;
-  auto dev = device_factors();
-  s = dev.ok() ? dev.value()->eval_batch(kq, out) : dev.status();
-  if (s.ok()) return s;
-  if (!ocl::fall_back_after(s)) return s;
-  return Model::eval_batch(q, out);
-}
-
-Status FmfModel::decode(const DecodeRequest& req, Btf& out) const {
-  BTFC_ASSIGN_OR_RETURN(ResolvedRequest rr, resolve_request(m_desc, req));
-  BTFC_RETURN_IF_ERROR(prepare_output(rr.desc, out));
-  if (m_desc.channels == 3 && m_cfg.color_model < 0 && native_eps() && ocl::use_opencl()) {
-    Status s = decode_cl(rr, out);
-    if (s.ok() || !ocl::fall_back_after(s)) return s;
-  }
-  // The C++ reference (and the CPU path): per texel block, one Eigen GEMM per factorized block.
-  const Index nl = Index(rr.lights.size()), nv = Index(rr.views.size());
-  const Index w = rr.desc.width, n = Index(rr.desc.num_texels()), m = Index(rr.desc.abrdf_size());
-  const int nc = m_desc.channels;
-  // Gather the U rows of the requested directions, in the output's row order.
-  const int nblocks = int(m_blocks.size());
-  // Stored transposed (components x rows): fixed_order_product's right operand.
-  std::vector<MatrixXfR> Usub(nblocks);
-  const Index rows_per_block = m_cfg.dfmf ? nl * nv : m;
-  for (int k = 0; k < nblocks; ++k) {
-    Usub[k].resize(rows_per_block, m_blocks[k].U.cols());
-    for (Index v = 0; v < nv; ++v)
-      for (Index l = 0; l < nl; ++l) {
-        if (m_cfg.dfmf) {
-          Usub[k].row(l + nl * v) = m_blocks[k].U.row(rr.lights[l] + Index(m_desc.num_lights()) * rr.views[v]);
-        } else {
-          for (int c = 0; c < nc; ++c)
-            Usub[k].row(c + nc * (l + nl * v)) = m_blocks[k].U.row(Index(m_desc.row(rr.lights[l], rr.views[v], c)));
-        }
-      }
-    Usub[k] = Usub[k].transpose().eval();
-  }
-  // Texel blocks bound the temporary memory; each block is one GEMM per factorized channel.
-  // Texel tiles of at most ~16 M temporary floats per channel (64 MB), and buffers reused across
-  // tiles: fresh memory is slow to fault in on the VMs btfc runs on, and a 4096-texel tile of a
-  // UBO2014 per-channel model would need 1.1 GB of temporaries.
-  const Index tb = std::clamp<Index>((Index(16) << 20) / std::max<Index>(1, rows_per_block), 16, 4096);
-  std::vector<MatrixXfR> sx(nblocks);
-  MatrixXfR ch[3];
-  for (Index t0 = 0; t0 < n; t0 += tb) {
-    const Index nb = std::min(tb, n - t0);
-    for (int k = 0; k < nblocks; ++k) {
-      sx[k].resize(nb, m_blocks[k].SxV.cols());
-      for (Index i = 0; i < nb; ++i) {
-        const Index t = t0 + i, sx_t = (rr.x0 + t % w) + Index(m_desc.width) * (rr.y0 + t / w);
-        sx[k].row(i) = m_blocks[k].SxV.row(sx_t);
-      }
-    }
-    Eigen::Map<MatrixXfR> dst(out.data() + size_t(t0) * size_t(m), nb, m);
-    // fixed_order_product, not a GEMM: a texel's values must not depend on the tile it falls
-    // in, so that band-wise (streamed) decodes equal whole decodes bit for bit.
-    auto product = [&](int k, float* to) {
-      fixed_order_product(sx[k].data(), size_t(nb), size_t(sx[k].cols()), size_t(sx[k].cols()), Usub[k].data(),
-                          size_t(rows_per_block), to, size_t(rows_per_block));
-    };
-    if (!m_cfg.dfmf) {
-      product(0, dst.data());
-      if (m_cfg.color_model == 12) dst = (dst.array().exp() - k_drr_eps).matrix();  // Bonn FMF dynamic range reduction
-      continue;
-    }
-    for (int k = 0; k < 3; ++k) {
-      ch[k].resize(nb, rows_per_block);  // no reallocation when the size is unchanged
-      product(k, ch[k].data());
-    }
-#pragma omp parallel for schedule(static)
-    for (Index i = 0; i < nb; ++i)
-      for (Index r = 0; r < rows_per_block; ++r) {
-        const float in[3] = {ch[0](i, r), ch[1](i, r), ch[2](i, r)};
-        undecorrelate(in, &dst(i, 3 * r));
-      }
-  }
-  return {};
-}
-
-Status FmfModel::save(ContainerWriter& w) const {
-  BTFC_RETURN_IF_ERROR(m_quant_status);
-  if (m_cfg.color_model >= 0)
-    return unsupported("fmf: a model with Bonn colour model " + std::to_string(m_cfg.color_model) +
-                       " cannot be saved as .btfc (only 11 = color=dfmf and 0 = color=rgb); decompress and re-compress it instead");
-  for (const Block& b : m_blocks) {
-    const uint64_t rows = uint64_t(b.U.rows()), cols = uint64_t(b.U.cols()), texels = uint64_t(b.SxV.rows());
-    if (!b.coded.empty()) {  // precision=q: the zq tensors made when quantizing
-      for (const Tensor& t : b.coded) w.add_tensor(t);
-      w.add_tensor(Tensor::from_f32("scale." + b.name, {cols}, b.scale.data()));
-      w.add_tensor(Tensor::from_f32("S." + b.name, {cols}, b.S.data()));
-      continue;
-    }
-    MatrixXfR sxv_scaled = b.SxV * b.scale.cwiseInverse().asDiagonal();
-    auto put = [&](const std::string& name, const MatrixXfR& M, std::vector<uint64_t> shape) {
-      if (!m_cfg.half) {
-        w.add_tensor(Tensor::from_f32(name, std::move(shape), M.data()));
-        return;
-      }
-      Tensor t;
-      t.name = name;
-      t.dtype = DType::f16;
-      t.shape = std::move(shape);
-      t.bytes.resize(size_t(M.size()) * 2);
-      for (Index i = 0; i < M.size(); ++i) {
-        uint16_t bits = Imath::half(M.data()[i]).bits();
-        t.bytes[2 * i] = uint8_t(bits & 0xff);
-        t.bytes[2 * i + 1] = uint8_t(bits >> 8);
-      }
-      w.add_tensor(std::move(t));
-    };
-    put("U." + b.name, b.U, {rows, cols});
-    put("SxV." + b.name, sxv_scaled, {texels, cols});
-    w.add_tensor(Tensor::from_f32("scale." + b.name, {cols}, b.scale.data()));
-    w.add_tensor(Tensor::from_f32("S." + b.name, {cols}, b.S.data()));
-  }
-  return {};
-}
+namespace {
 
 // Rounds U and SxV to their storage precision, so the in-memory model is what the file holds.
 // (precision=q is float here: FmfModel's constructor quantizes it, knowing the texture size.)
@@ -423,6 +74,21 @@ Block block_from_svd(const std::string& name, SvdResult r, bool half, int max_ra
                                       " (the data's numerical rank limit is " + std::to_string(r.data_rank_limit) + ")");
   if (!r.target_reached) stats.note("target." + name, "target_error not reached at the maximum rank " + std::to_string(max_rank));
   return b;
+}
+
+// The spec a model records: a rank the data cannot have (more components than its rows, texels
+// or numerical rank; block_from_svd notes it as "clamped.<block>") is stored as the rank kept,
+// so that the spec says what the model is. With target_error the rank is an upper bound and
+// stays as asked.
+Result<Params> with_used_ranks(const Params& p, const std::vector<Block>& blocks) {
+  if (p.get_real("target_error") > 0 || blocks.empty()) return p;
+  const bool dfmf = blocks.size() == 3;
+  const int rank = int(p.get_int("rank")), chroma = int(p.get_int("chroma_rank"));
+  const int ky = int(blocks[0].U.cols()), kc = dfmf ? int(std::max(blocks[1].U.cols(), blocks[2].U.cols())) : 0;
+  if (ky >= rank && (!dfmf || kc >= (chroma ? chroma : rank))) return p;
+  BTFC_ASSIGN_OR_RETURN(Params q, with_value(p, "rank", std::to_string(ky), k_params));
+  if (dfmf) return with_value(q, "chroma_rank", std::to_string(kc), k_params);
+  return q;
 }
 
 class FmfCodec final : public Codec {
@@ -498,6 +164,7 @@ class FmfCodec final : public Codec {
       }
       stats.add("negative_luminance_clamped", double(clamped));
     }
+    BTFC_ASSIGN_OR_RETURN(rp, with_used_ranks(rp, blocks));
     auto model = std::make_unique<FmfModel>(d, rp.canonical(), config_from(rp), std::move(blocks));
     if (dfmf_target) {
       BTFC_ASSIGN_OR_RETURN(model, truncate_to_target(btf, std::move(model), opt.target_rel_error, stats));
@@ -609,153 +276,13 @@ class FmfCodec final : public Codec {
 };
 
 }  // namespace
+}  // namespace fmf
+
+using namespace fmf;
 
 const Codec& fmf_codec() {
   static const FmfCodec codec;
   return codec;
-}
-
-}  // namespace btfc
-
-// ---- Bonn DFMF / FMF files as fmf models (fmf.h; formats.md 2.2) ----
-namespace btfc {
-namespace {
-
-void bonn_undecorrelate(const Config& cfg, const float* in, float* rgb) {
-  // YCoCg -> RGB (BTFLIB undecorrelate.m, model 4).
-  static constexpr float k_rgb_from_ycocg[3][3] = {{1, 1, -1}, {1, 0, 1}, {1, -1, -1}};
-  auto mul = [&](const float (*M)[3], const float* v) {
-    for (int c = 0; c < 3; ++c) rgb[c] = M[c][0] * v[0] + M[c][1] * v[1] + M[c][2] * v[2];
-  };
-  switch (cfg.color_model) {
-    case 0:
-      for (int c = 0; c < 3; ++c) rgb[c] = in[c];
-      return;
-    case 1:
-      return mul(k_rgb_from_yuv, in);
-    case 3:  // PCA: row vector times T, plus the mean
-      for (int j = 0; j < 3; ++j)
-        rgb[j] = in[0] * cfg.color_transform[0][j] + in[1] * cfg.color_transform[1][j] + in[2] * cfg.color_transform[2][j] +
-                 cfg.color_mean[j];
-      return;
-    case 4:
-      return mul(k_rgb_from_ycocg, in);
-    case 9: {
-      const float yuv[3] = {std::exp(in[0]) - k_drr_eps, in[1], in[2]};
-      return mul(k_rgb_from_yuv, yuv);
-    }
-    case 10: {
-      // sign(v) * exp(|v| + log eps); sign(0) = 0 as in MATLAB.
-      auto unlog = [](float v) { return v == 0 ? 0.0f : std::copysign(k_drr_eps * std::exp(std::fabs(v)), v); };
-      const float yuv[3] = {std::exp(in[0]) - k_drr_eps, unlog(in[1]), unlog(in[2])};
-      return mul(k_rgb_from_yuv, yuv);
-    }
-    case 12:
-      for (int c = 0; c < 3; ++c) rgb[c] = std::exp(in[c]) - k_drr_eps;
-      return;
-    default:  // 11 never reaches here (native); make_fmf_model rejects the rest
-      for (int c = 0; c < 3; ++c) rgb[c] = 0;
-  }
-}
-
-}  // namespace
-
-Result<std::unique_ptr<Model>> make_fmf_model(const BtfDesc& desc, int cm, std::vector<FmfFactors> in,
-                                              const float color_mean[3], const float color_transform[3][3], bool half) {
-  BTFC_RETURN_IF_ERROR(desc.validate());
-  const bool per_channel = in.size() == 3;
-  if (in.size() != 1 && !per_channel)
-    return invalid_argument("fmf: a Bonn factorization needs 1 (rgb) or 3 (per channel) blocks, got " + std::to_string(in.size()));
-  if (per_channel && desc.channels != 3)
-    return unsupported("fmf: per-channel (DFMF) factorizations are supported for 3 channels only, this one has " +
-                       std::to_string(desc.channels));
-  const bool ok_model = per_channel ? (cm == 0 || cm == 1 || cm == 3 || cm == 4 || (cm >= 9 && cm <= 12)) : (cm == 0 || cm == 12);
-  if (!ok_model)
-    return unsupported("fmf: Bonn colour model " + std::to_string(cm) +
-                       (cm == 2 ? " (Lab)" : cm == 5 || cm == 6 ? " (spectral)" : "") + " is not supported" +
-                       (per_channel ? "" : " for an FMF (one rgb block)"));
-  Config cfg;
-  cfg.dfmf = per_channel;
-  cfg.half = half;
-  cfg.color_model = (per_channel && cm == 11) || (!per_channel && cm == 0) ? -1 : cm;
-  for (int i = 0; i < 3; ++i) {
-    cfg.color_mean[i] = color_mean ? color_mean[i] : 0.0f;
-    for (int j = 0; j < 3; ++j) cfg.color_transform[i][j] = color_transform ? color_transform[i][j] : float(i == j);
-  }
-  const size_t rows = per_channel ? desc.num_images() : desc.abrdf_size(), texels = desc.num_texels();
-  std::vector<Block> blocks;
-  for (FmfFactors& f : in) {
-    const std::string what = "fmf: block '" + f.name + "'";
-    if (f.C < 1 || f.C > 4096) return unsupported(what + " has " + std::to_string(f.C) + " components (1..4096 supported)");
-    const size_t C = size_t(f.C);
-    if (f.U.size() != rows * C || f.SxV.size() != texels * C || f.S.size() != C)
-      return invalid_argument(what + ": U, SxV or S size disagrees with " + std::to_string(rows) + " rows, " +
-                              std::to_string(texels) + " texels, " + std::to_string(C) + " components");
-    Block b;
-    b.name = f.name;
-    b.U = Eigen::Map<const MatrixXfR>(f.U.data(), Index(rows), Index(C));
-    std::vector<float>().swap(f.U);  // release as we go: peak memory = model + one block
-    b.SxV = Eigen::Map<const MatrixXfR>(f.SxV.data(), Index(texels), Index(C));
-    std::vector<float>().swap(f.SxV);
-    b.S = Eigen::Map<const Eigen::VectorXf>(f.S.data(), Index(C));
-    // The factors are stored exactly (no per-component scale): a half Bonn file saves to a
-    // half .btfc without a second rounding.
-    b.scale = Eigen::VectorXf::Ones(Index(C));
-    if (!b.U.allFinite() || !b.SxV.allFinite()) return corrupt_data(what + " holds non-finite values");
-    blocks.push_back(std::move(b));
-  }
-  std::string text = per_channel ? "rank=" + std::to_string(blocks[0].U.cols()) + ":chroma_rank=" +
-                                       std::to_string(std::max(blocks[1].U.cols(), blocks[2].U.cols())) + ":color=dfmf:offset=" +
-                                       std::to_string(k_drr_eps)  // the file's luminance offset (colour model 11's), not "automatic"
-                                 : "rank=" + std::to_string(blocks[0].U.cols()) + ":color=rgb";
-  text += half ? ":precision=half" : ":precision=float";
-  BTFC_ASSIGN_OR_RETURN(auto spec, parse_spec_string("fmf:" + text));
-  BTFC_ASSIGN_OR_RETURN(Params p, bind_params(spec, k_params));
-  auto model = std::make_unique<FmfModel>(desc, p.canonical(), cfg, std::move(blocks));
-  for (const Block& b : model->blocks()) model->mutable_stats().add("rank." + b.name, double(b.U.cols()));
-  model->mutable_stats().add("bonn_color_model", cm);
-  return std::unique_ptr<Model>(std::move(model));
-}
-
-size_t dfmf_channel(const float* abrdf, size_t rows, int k, float offset, float* out) {
-  size_t clamped = 0;
-  for (size_t r = 0; r < rows; ++r) {
-    const float* rgb = abrdf + 3 * r;
-    float y = k_yuv.m[0][0] * rgb[0] + k_yuv.m[0][1] * rgb[1] + k_yuv.m[0][2] * rgb[2];
-    if (y < 0) y = 0, ++clamped;
-    if (k > 0) out[r] = (k_yuv.m[k][0] * rgb[0] + k_yuv.m[k][1] * rgb[1] + k_yuv.m[k][2] * rgb[2]) / (y + offset);
-    else out[r] = std::log(y + offset);
-  }
-  return clamped;
-}
-
-void dfmf_luminance_moments(const float* abrdf, size_t rows, double* sum_y, double* sum_y2) {
-  double s = 0, s2 = 0;
-  for (size_t r = 0; r < rows; ++r) {
-    const float* rgb = abrdf + 3 * r;
-    const double y = std::max(0.0f, k_yuv.m[0][0] * rgb[0] + k_yuv.m[0][1] * rgb[1] + k_yuv.m[0][2] * rgb[2]);
-    s += y, s2 += y * y;
-  }
-  *sum_y += s, *sum_y2 += s2;
-}
-
-double dfmf_auto_offset(double sum_y, double sum_y2) {
-  const double e = sum_y > 0 ? sum_y2 / sum_y : 0;
-  return std::isfinite(e) && e > k_drr_eps ? e : k_drr_eps;
-}
-
-Result<Params> dfmf_with_offset(const Params& p, double offset) {
-  BTFC_ASSIGN_OR_RETURN(SpecString spec, parse_spec_string(p.canonical()));
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.9g", offset);
-  bool placed = false;
-  for (auto& [k, v] : spec.values)
-    if (k == "offset") v = buf, placed = true;
-  if (!placed) spec.values.emplace_back("offset", buf);
-  std::string text = spec.codec;
-  for (const auto& [k, v] : spec.values) text += ":" + k + "=" + v;
-  BTFC_ASSIGN_OR_RETURN(SpecString again, parse_spec_string(text));
-  return bind_params(again, k_params);
 }
 
 namespace {
@@ -777,7 +304,8 @@ Result<std::unique_ptr<Model>> model_from_svds(const BtfDesc& desc, const Params
     const int max_rank = k == 0 ? rank : (chroma ? chroma : rank);
     blocks.push_back(block_from_svd(cfg.dfmf ? names[k] : "rgb", std::move(r), cfg.half, max_rank, p.get_real("target_error"), stats));
   }
-  auto model = std::make_unique<FmfModel>(desc, p.canonical(), cfg, std::move(blocks));
+  BTFC_ASSIGN_OR_RETURN(Params used, with_used_ranks(p, blocks));
+  auto model = std::make_unique<FmfModel>(desc, used.canonical(), cfg, std::move(blocks));
   model->mutable_stats() = std::move(stats);
   return std::unique_ptr<Model>(std::move(model));
 }

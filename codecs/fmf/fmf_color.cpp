@@ -1,0 +1,163 @@
+// fmf's colour transforms (fmf_model.h): dfmf's log-luminance / chroma channels with their
+// offset, Bonn's colour models for factorizations read from Bonn files, and those
+// factorizations as models (make_fmf_model, fmf.h).
+#include <cmath>
+#include <cstdio>
+
+#include "codecs/fmf/fmf_model.h"
+
+namespace btfc {
+namespace fmf {
+namespace {
+
+struct YuvFromRgb {
+  float m[3][3];
+  YuvFromRgb() {
+    double a[3][3];
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) a[i][j] = k_rgb_from_yuv[i][j];
+    const double det = a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0]) +
+                       a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]);
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) {  // adjugate / det
+        const int r0 = (j + 1) % 3, r1 = (j + 2) % 3, c0 = (i + 1) % 3, c1 = (i + 2) % 3;
+        m[i][j] = float((a[r0][c0] * a[r1][c1] - a[r0][c1] * a[r1][c0]) / det);
+      }
+  }
+};
+const YuvFromRgb k_yuv;
+
+}  // namespace
+
+void bonn_undecorrelate(const Config& cfg, const float* in, float* rgb) {
+  // YCoCg -> RGB (BTFLIB undecorrelate.m, model 4).
+  static constexpr float k_rgb_from_ycocg[3][3] = {{1, 1, -1}, {1, 0, 1}, {1, -1, -1}};
+  auto mul = [&](const float (*M)[3], const float* v) {
+    for (int c = 0; c < 3; ++c) rgb[c] = M[c][0] * v[0] + M[c][1] * v[1] + M[c][2] * v[2];
+  };
+  switch (cfg.color_model) {
+    case 0:
+      for (int c = 0; c < 3; ++c) rgb[c] = in[c];
+      return;
+    case 1:
+      return mul(k_rgb_from_yuv, in);
+    case 3:  // PCA: row vector times T, plus the mean
+      for (int j = 0; j < 3; ++j)
+        rgb[j] = in[0] * cfg.color_transform[0][j] + in[1] * cfg.color_transform[1][j] + in[2] * cfg.color_transform[2][j] +
+                 cfg.color_mean[j];
+      return;
+    case 4:
+      return mul(k_rgb_from_ycocg, in);
+    case 9: {
+      const float yuv[3] = {std::exp(in[0]) - k_drr_eps, in[1], in[2]};
+      return mul(k_rgb_from_yuv, yuv);
+    }
+    case 10: {
+      // sign(v) * exp(|v| + log eps); sign(0) = 0 as in MATLAB.
+      auto unlog = [](float v) { return v == 0 ? 0.0f : std::copysign(k_drr_eps * std::exp(std::fabs(v)), v); };
+      const float yuv[3] = {std::exp(in[0]) - k_drr_eps, unlog(in[1]), unlog(in[2])};
+      return mul(k_rgb_from_yuv, yuv);
+    }
+    case 12:
+      for (int c = 0; c < 3; ++c) rgb[c] = std::exp(in[c]) - k_drr_eps;
+      return;
+    default:  // 11 never reaches here (native); make_fmf_model rejects the rest
+      for (int c = 0; c < 3; ++c) rgb[c] = 0;
+  }
+}
+
+}  // namespace fmf
+
+using namespace fmf;
+
+Result<std::unique_ptr<Model>> make_fmf_model(const BtfDesc& desc, int cm, std::vector<FmfFactors> in,
+                                              const float color_mean[3], const float color_transform[3][3], bool half) {
+  BTFC_RETURN_IF_ERROR(desc.validate());
+  const bool per_channel = in.size() == 3;
+  if (in.size() != 1 && !per_channel)
+    return invalid_argument("fmf: a Bonn factorization needs 1 (rgb) or 3 (per channel) blocks, got " + std::to_string(in.size()));
+  if (per_channel && desc.channels != 3)
+    return unsupported("fmf: per-channel (DFMF) factorizations are supported for 3 channels only, this one has " +
+                       std::to_string(desc.channels));
+  const bool ok_model = per_channel ? (cm == 0 || cm == 1 || cm == 3 || cm == 4 || (cm >= 9 && cm <= 12)) : (cm == 0 || cm == 12);
+  if (!ok_model)
+    return unsupported("fmf: Bonn colour model " + std::to_string(cm) +
+                       (cm == 2 ? " (Lab)" : cm == 5 || cm == 6 ? " (spectral)" : "") + " is not supported" +
+                       (per_channel ? "" : " for an FMF (one rgb block)"));
+  Config cfg;
+  cfg.dfmf = per_channel;
+  cfg.half = half;
+  cfg.color_model = (per_channel && cm == 11) || (!per_channel && cm == 0) ? -1 : cm;
+  for (int i = 0; i < 3; ++i) {
+    cfg.color_mean[i] = color_mean ? color_mean[i] : 0.0f;
+    for (int j = 0; j < 3; ++j) cfg.color_transform[i][j] = color_transform ? color_transform[i][j] : float(i == j);
+  }
+  const size_t rows = per_channel ? desc.num_images() : desc.abrdf_size(), texels = desc.num_texels();
+  std::vector<Block> blocks;
+  for (FmfFactors& f : in) {
+    const std::string what = "fmf: block '" + f.name + "'";
+    if (f.C < 1 || f.C > 4096) return unsupported(what + " has " + std::to_string(f.C) + " components (1..4096 supported)");
+    const size_t C = size_t(f.C);
+    if (f.U.size() != rows * C || f.SxV.size() != texels * C || f.S.size() != C)
+      return invalid_argument(what + ": U, SxV or S size disagrees with " + std::to_string(rows) + " rows, " +
+                              std::to_string(texels) + " texels, " + std::to_string(C) + " components");
+    Block b;
+    b.name = f.name;
+    b.U = Eigen::Map<const MatrixXfR>(f.U.data(), Index(rows), Index(C));
+    std::vector<float>().swap(f.U);  // release as we go: peak memory = model + one block
+    b.SxV = Eigen::Map<const MatrixXfR>(f.SxV.data(), Index(texels), Index(C));
+    std::vector<float>().swap(f.SxV);
+    b.S = Eigen::Map<const Eigen::VectorXf>(f.S.data(), Index(C));
+    // The factors are stored exactly (no per-component scale): a half Bonn file saves to a
+    // half .btfc without a second rounding.
+    b.scale = Eigen::VectorXf::Ones(Index(C));
+    if (!b.U.allFinite() || !b.SxV.allFinite()) return corrupt_data(what + " holds non-finite values");
+    blocks.push_back(std::move(b));
+  }
+  std::string text = per_channel ? "rank=" + std::to_string(blocks[0].U.cols()) + ":chroma_rank=" +
+                                       std::to_string(std::max(blocks[1].U.cols(), blocks[2].U.cols())) + ":color=dfmf:offset=" +
+                                       std::to_string(k_drr_eps)  // the file's luminance offset (colour model 11's), not "automatic"
+                                 : "rank=" + std::to_string(blocks[0].U.cols()) + ":color=rgb";
+  text += half ? ":precision=half" : ":precision=float";
+  BTFC_ASSIGN_OR_RETURN(auto spec, parse_spec_string("fmf:" + text));
+  BTFC_ASSIGN_OR_RETURN(Params p, bind_params(spec, params_table()));
+  auto model = std::make_unique<FmfModel>(desc, p.canonical(), cfg, std::move(blocks));
+  for (const Block& b : model->blocks()) model->mutable_stats().add("rank." + b.name, double(b.U.cols()));
+  model->mutable_stats().add("bonn_color_model", cm);
+  return std::unique_ptr<Model>(std::move(model));
+}
+
+size_t dfmf_channel(const float* abrdf, size_t rows, int k, float offset, float* out) {
+  size_t clamped = 0;
+  for (size_t r = 0; r < rows; ++r) {
+    const float* rgb = abrdf + 3 * r;
+    float y = k_yuv.m[0][0] * rgb[0] + k_yuv.m[0][1] * rgb[1] + k_yuv.m[0][2] * rgb[2];
+    if (y < 0) y = 0, ++clamped;
+    if (k > 0) out[r] = (k_yuv.m[k][0] * rgb[0] + k_yuv.m[k][1] * rgb[1] + k_yuv.m[k][2] * rgb[2]) / (y + offset);
+    else out[r] = std::log(y + offset);
+  }
+  return clamped;
+}
+
+void dfmf_luminance_moments(const float* abrdf, size_t rows, double* sum_y, double* sum_y2) {
+  double s = 0, s2 = 0;
+  for (size_t r = 0; r < rows; ++r) {
+    const float* rgb = abrdf + 3 * r;
+    const double y = std::max(0.0f, k_yuv.m[0][0] * rgb[0] + k_yuv.m[0][1] * rgb[1] + k_yuv.m[0][2] * rgb[2]);
+    s += y, s2 += y * y;
+  }
+  *sum_y += s, *sum_y2 += s2;
+}
+
+double dfmf_auto_offset(double sum_y, double sum_y2) {
+  const double e = sum_y > 0 ? sum_y2 / sum_y : 0;
+  return std::isfinite(e) && e > k_drr_eps ? e : k_drr_eps;
+}
+
+Result<Params> dfmf_with_offset(const Params& p, double offset) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.9g", offset);
+  return with_value(p, "offset", buf, params_table());
+}
+
+}  // namespace btfc
