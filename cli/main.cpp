@@ -138,8 +138,8 @@ int main(int argc, char** argv) {
   convert->callback([&] { code = cmd_convert(g, cv); });
 
   RelightArgs ra;
-  auto* relight = app.add_subcommand("relight", "render an lpca model's flat sample under a lat-long HDR environment (spherical harmonics)");
-  relight->add_option("input", ra.in, "lpca model .btfc")->required();
+  auto* relight = app.add_subcommand("relight", "render a model's flat sample under a lat-long HDR environment (spherical harmonics; lpca by its precomputed radiance transfer, other codecs by quadrature over the measured lights)");
+  relight->add_option("input", ra.in, "model .btfc or Bonn .btf (any codec)")->required();
   relight->add_option("--env", ra.env, "lat-long environment map (EXR, row 0 = zenith)")->required();
   relight->add_option("--view", ra.view, "view direction THETA,PHI in degrees")->required();
   relight->add_option("-o,--output", ra.out, "output image (EXR, one pixel per texel)")->required();

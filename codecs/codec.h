@@ -86,6 +86,18 @@ class Model {
     return invalid_argument(spec() + ": this codec has no precomputed radiance transfer for an environment");
   }
 
+  // The flat sample (its frame = the world's, z up) under a distant lighting environment given
+  // as spherical harmonics, seen from `view_dir` (unit, pointing to the viewer, above the
+  // horizon): per texel the quadrature over the measured lights
+  //   L(x, v) = sum_l w_l f(x, l, v) E(d_l)
+  // with w_l each light direction's Voronoi solid angle (core/sh.h hemisphere_cell_weights; the
+  // BTF holds the cosine factor) and views interpolated (Delaunay, 3 measured views). One RGB
+  // triple per texel, row-major, the BTF's width x height; one channel is replicated to grey.
+  // Works for every codec through eval() (codecs/relight.cpp). lpca overrides it with its
+  // precomputed-radiance-transfer path (seed 002), which equals this sum when the environment's
+  // order is at most the model's SH order.
+  virtual Result<std::vector<float>> relight(const EnvironmentSH& env, const Vec3& view_dir) const;
+
   // Writes the model's tensors (the container's DESC and CODC are written by the caller).
   virtual Status save(ContainerWriter& w) const = 0;
   // Bytes of the stored model payload (tensors), for the compression ratio.

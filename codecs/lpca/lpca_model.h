@@ -32,6 +32,9 @@ class LpcaModel final : public Model {
   Status eval_dir(int x, int y, const Vec3& wl, const Vec3& wv, float* out) const override;
   Result<std::vector<Tensor>> gpu_tensors() const override;
   Status attach_environment(const EnvironmentSH& env) override;  // relight.cpp
+  // The PRT path of seed 002 (relight.cpp): equals Model::relight's quadrature for environments
+  // of at most sh_order bands, at the cost of one dot product per texel and component.
+  Result<std::vector<float>> relight(const EnvironmentSH& env, const Vec3& view_dir) const override;
   Status save(ContainerWriter& w) const override;
   uint64_t payload_bytes() const override;
   ModelStats stats() const override { return m_stats; }

@@ -140,6 +140,11 @@ Result<std::vector<Tensor>> prt_tensors(const Model& model, const EnvironmentSH&
   return out;
 }
 
+Result<std::vector<float>> LpcaModel::relight(const EnvironmentSH& env, const Vec3& view_dir) const {
+  int w = 0, h = 0;
+  return btfc::relight(*this, env, view_dir, w, h);
+}
+
 Status LpcaModel::attach_environment(const EnvironmentSH& env) { return btfc::attach_environment(*this, env); }
 
 Status attach_environment(Model& model, const EnvironmentSH& env, const RelightOptions& opt) {
