@@ -11,7 +11,6 @@
 #include <sstream>
 
 #include "codecs/codec.h"
-#include "codecs/lpca/lpca.h"
 #include "formats/exr/envmap.h"
 #include "codecs/target.h"
 #include "core/cl_runtime.h"
@@ -102,6 +101,12 @@ void print_stats(const ModelStats& st, json* j) {
 }
 
 }  // namespace
+
+void note_clamped(const Global& g, const std::string& input, const ModelStats& stats) {
+  if (g.quiet) return;
+  for (const auto& [k, v] : stats.notes)
+    if (k.rfind("clamped", 0) == 0 || k.find("_clamped") != std::string::npos) std::cerr << "note: " << input << ": " << v << "\n";
+}
 
 void set_device(const std::string& choice) {
   auto c = ocl::parse_device_choice(choice);
@@ -275,7 +280,7 @@ int cmd_compress(const Global& g, const CompressArgs& given) {
   auto t0 = Clock::now();
   auto input = open_input(a.in);
   if (!input.ok()) return fail(g, input.status());
-  if (int code = 0; compress_streamed(g, a, input.value()->desc(), code)) return code;
+  if (int code = 0; compress_streamed(g, a, *input.value(), code)) return code;
   auto resolved = resolve_spec(a.spec);
   if (!resolved.ok()) return fail(g, resolved.status());
   auto [codec, params] = std::move(resolved).value();
@@ -310,6 +315,7 @@ int cmd_compress(const Global& g, const CompressArgs& given) {
   }
   if (!model.ok()) return fail(g, model.status().with_context(a.in));
   const double enc_s = seconds_since(t0);
+  note_clamped(g, a.in, model.value()->stats());
   Status s = write_model(*model.value(), a.out);
   if (!s.ok()) return fail(g, s);
   const double ratio = double(btf->desc().num_values()) * 4.0 / double(std::filesystem::file_size(a.out));
@@ -446,8 +452,8 @@ int cmd_relight(const Global& g, const RelightArgs& a) {
   if (!env.ok()) return fail(g, env.status());
   const double project_s = seconds_since(t0);
   t0 = Clock::now();
-  int w = 0, h = 0;
-  auto img = relight(*model.value(), env.value(), view.value(), w, h);
+  const int w = model.value()->desc().width, h = model.value()->desc().height;
+  auto img = model.value()->relight(env.value(), view.value());
   if (!img.ok()) return fail(g, img.status().with_context(a.in));
   const double relight_s = seconds_since(t0);
   RgbImage rgb{w, h, std::move(img).value()};

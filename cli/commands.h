@@ -10,6 +10,10 @@
 #include "core/status.h"
 
 namespace CLI { class App; }
+namespace btfc {
+class BtfInput;     // formats/reader.h
+struct ModelStats;  // codecs/codec.h
+}  // namespace btfc
 
 namespace btfc::cli {
 
@@ -116,9 +120,14 @@ int cmd_convert(const Global& g, const ConvertArgs& a);
 int cmd_bench(const Global& g, const BenchArgs& a);
 int cmd_render(const Global& g, const RenderArgs& a);
 
+// A parameter the codec could not honour as asked (its stats notes "clamped..." / "..._clamped":
+// a rank above the data's size, levels beyond the texture): one "note:" line each on stderr. The
+// model's spec holds the value used.
+void note_clamped(const Global& g, const std::string& input, const ModelStats& stats);
+
 // Bounded memory (cli/stream_commands.cpp): each returns true when it handled the command
 // (the BTF does not fit in --max-memory, or the output is a streamed Bonn BDI), with `code` set.
-bool compress_streamed(const Global& g, const CompressArgs& a, const BtfDesc& desc, int& code);
+bool compress_streamed(const Global& g, const CompressArgs& a, BtfInput& input, int& code);
 bool decompress_streamed(const Global& g, const DecompressArgs& a, int& code);
 bool bench_streamed(const Global& g, const BenchArgs& a, int& code);
 

@@ -84,12 +84,12 @@ void add_export_commands(CLI::App& app, const Global& g, int& code) {
   ex->add_flag("--float", a.float32, "store float data as RGBA32F instead of RGBA16F");
   ex->add_flag("--clamp-half", a.clamp_half, "clamp values beyond the half range (reported) instead of scaling the texture");
   ex->add_option("--direction-map", a.direction_map, "size of the parabolic direction index / weight maps")->check(CLI::Range(2, 1024));
-  ex->add_option("--env", a.env, "lpca: lat-long EXR environment for the PRT maps (seed 002 section 5.1)");
-  ex->add_option("--sh-order", a.sh_order, "lpca: SH order of the environment projection")->check(CLI::Range(1, 12));
+  ex->add_option("--env", a.env, "lat-long EXR environment for codecs with precomputed radiance transfer (lpca, seed 002 section 5.1); others refuse it");
+  ex->add_option("--sh-order", a.sh_order, "SH order of the --env projection")->check(CLI::Range(1, 12));
   ex->add_option("--scene", a.scene, "scene.json: footprints, light/view cones, GPU budget; keep only what the scene needs");
   ex->add_option("--material", a.material, "material of the scene file (default: the first)");
-  ex->add_option("--bsvtf-quality", a.bsvtf_quality, "fmf: DCT quality of the BSVTF tiles (1..100)")->check(CLI::Range(1, 100));
-  ex->add_flag("--no-bsvtf", a.no_bsvtf, "fmf: skip the BSVTF streaming file");
+  ex->add_option("--bsvtf-quality", a.bsvtf_quality, "DCT quality of the BSVTF tiles written beside a factorization (fmf, Bonn FMF/DFMF), 1..100")->check(CLI::Range(1, 100));
+  ex->add_flag("--no-bsvtf", a.no_bsvtf, "skip the BSVTF streaming file of a factorization");
   ex->add_flag("--no-previews", a.no_previews, "skip the EXR / PNG previews");
   ex->callback([&] { code = cmd_export(g, a); });
 }

@@ -41,12 +41,13 @@ Result<size_t> limit_of(const std::string& text) {
 // it did. `out` keeps an automatic working file alive until the caller is done with it.
 Result<std::unique_ptr<Model>> encode_streamed(const Global& g, const std::string& in, const std::string& spec, const std::string& work_file,
                                                const std::string& temp_dir, size_t limit, unsigned long long seed, json& report,
-                                               OutOfCoreResult& out) {
+                                               OutOfCoreResult& out, BtfInput* opened = nullptr) {
   Progress progress(g.quiet || g.json);
   OutOfCoreJob job;
   job.input = in, job.spec = spec, job.max_bytes = limit, job.seed = seed, job.work_file = work_file, job.temp_dir = temp_dir;
   job.progress = &progress;
   job.notes = !g.quiet && !g.json;
+  job.opened = opened;
   Collective single;
   BTFC_ASSIGN_OR_RETURN(out, compress_out_of_core(job, single));
   const WorkFile& wf = out.work;
@@ -81,10 +82,10 @@ void print_report(const json& r) {
 
 }  // namespace
 
-bool compress_streamed(const Global& g, const CompressArgs& a, const BtfDesc& in_desc, int& code) {
+bool compress_streamed(const Global& g, const CompressArgs& a, BtfInput& input, int& code) {
   auto limit = limit_of(a.max_memory);
   if (!limit.ok()) return code = fail(g, limit.status()), true;
-  const BtfDesc* desc = &in_desc;
+  const BtfDesc* desc = &input.desc();
   if (desc->num_values() * 4 <= *limit && a.work_file.empty()) return false;
   const auto t0 = Clock::now();
   json report;
@@ -95,9 +96,10 @@ bool compress_streamed(const Global& g, const CompressArgs& a, const BtfDesc& in
     return code = fail(g, invalid_argument(a.in + ": the BTF (" + format_bytes(desc->num_values() * 4) + " as float32) does not fit in --max-memory " +
                                            format_bytes(*limit) + "; " + r->first->name() + " needs it in memory (" + only_streaming_codecs() + ")")),
            true;
-  auto model = encode_streamed(g, a.in, a.spec, a.work_file, parent.string(), *limit, a.seed, report, ooc);
+  auto model = encode_streamed(g, a.in, a.spec, a.work_file, parent.string(), *limit, a.seed, report, ooc, &input);
   if (!model.ok()) return code = fail(g, model.status()), true;
   const double enc_s = since(t0);
+  note_clamped(g, a.in, model.value()->stats());
   Status s = write_model(*model.value(), a.out);
   if (!s.ok()) return code = fail(g, s), true;
   report["peak_rss_bytes"] = peak_rss_bytes();

@@ -41,7 +41,8 @@ Result<SvdResult> exact_svd(ConstMapF& B, const SvdOptions& opt) {
   // exists; B^T B is only chosen when n < m (few texels), where the copy is small.
   MatrixXd G = MatrixXd::Zero(k, k);
   const Index block = 4096;
-  if (opt.progress) opt.progress->start("fmf exact SVD", uint64_t((n + block - 1) / block));
+  // One step per Gram block, one for the eigendecomposition, one for the projection.
+  if (opt.progress) opt.progress->start("fmf exact SVD", uint64_t((n + block - 1) / block) + 2);
   if (rows_small) {
     for (Index j0 = 0; j0 < n; j0 += block) {
       const Index nb = std::min(block, n - j0);
@@ -53,12 +54,13 @@ Result<SvdResult> exact_svd(ConstMapF& B, const SvdOptions& opt) {
   } else {
     MatrixXd Bd = B.cast<double>();
     G.noalias() = Bd.transpose() * Bd;
+    if (opt.progress) opt.progress->advance((n + block - 1) / block);
   }
-  if (opt.progress) opt.progress->finish();
 
   Eigen::VectorXd lambda;
   MatrixXd E;
   sorted_eigen(G, lambda, E);
+  if (opt.progress) opt.progress->advance();
   SvdResult r;
   r.method = "exact";
   r.requested_rank = opt.max_rank;
@@ -81,6 +83,7 @@ Result<SvdResult> exact_svd(ConstMapF& B, const SvdOptions& opt) {
     r.U = U.cast<float>();
     r.SxV = (V * r.S.asDiagonal()).cast<float>();
   }
+  if (opt.progress) opt.progress->finish();
   return r;
 }
 

@@ -55,11 +55,11 @@ uint64_t band_lines(const BtfDesc& d, uint64_t bytes_per_value, size_t max_bytes
 }
 
 // One attempt at filling `w` from the input; an overflow (w.overflow() > 0) asks for a retry.
-Status fill(const std::string& input, BdiWriter& w, const BtfDesc& d, size_t max_bytes, Progress* progress) {
-  std::error_code ec;
+Status fill(BtfInput& in, BdiWriter& w, const BtfDesc& d, size_t max_bytes, Progress* progress) {
+  const std::string& input = in.path();
   const uint64_t texels = d.num_texels(), width = uint64_t(d.width);
-  if (fs::is_directory(input, ec)) {
-    BTFC_ASSIGN_OR_RETURN(ImageSetPlan plan, plan_image_set(input));
+  if (const ImageSetPlan* planned = in.image_set_plan()) {
+    const ImageSetPlan& plan = *planned;
     const uint64_t img_bytes = texels * uint64_t(d.channels) * 4;
     // Decoded images (float) + their half segments; OIIO's own per-image buffers come on top.
     const uint64_t k = std::clamp<uint64_t>(max_bytes / 2 / img_bytes, 1, d.num_images());
@@ -74,7 +74,7 @@ Status fill(const std::string& input, BdiWriter& w, const BtfDesc& d, size_t max
     if (progress) progress->finish();
     return {};
   }
-  if (is_raw_btfc(input, nullptr)) {
+  if (!in.model()) {  // raw data: a .btfc whose tensor is read in texel bands
     BTFC_ASSIGN_OR_RETURN(RawBands rb, RawBands::open(input));
     // Two float bands (the next one is read on a helper thread while this one is converted and
     // written) and the half copy of one band: 10 B/value.
@@ -100,7 +100,7 @@ Status fill(const std::string& input, BdiWriter& w, const BtfDesc& d, size_t max
     if (progress) progress->finish();
     return {};
   }
-  BTFC_ASSIGN_OR_RETURN(auto model, open_model(input));
+  const Model* model = in.model();  // a model input (model .btfc, Bonn file): decoded band by band
   const uint64_t lines = band_lines(d, 6, max_bytes);
   Btf band;
   if (progress) progress->start("working file (decoded texel bands)", (uint64_t(d.height) + lines - 1) / lines);
@@ -124,13 +124,13 @@ Result<BtfDesc> probe_btf(const std::string& path) {
   return in->desc();
 }
 
-Result<WorkFile> prepare_work_file(const std::string& input, const std::string& work_path, uint32_t lines, size_t max_bytes,
-                                   Progress* progress) {
+Result<WorkFile> prepare_work_file(BtfInput& in, const std::string& work_path, uint32_t lines, size_t max_bytes, Progress* progress) {
+  const std::string& input = in.path();
   const auto t0 = std::chrono::steady_clock::now();
   WorkFile wf;
   std::error_code ec;
   // An uncompressed BDI input is already a working file when its chunks fit the buffers.
-  if (!fs::is_directory(input, ec) && is_bonn_btf(input)) {
+  if (std::strcmp(in.format(), "bonn") == 0) {
     auto direct = BdiChunks::open(input);
     if (direct.ok() && direct->chunk_count(0) <= uint64_t(lines) * uint64_t(direct->desc().width)) {
       wf.path = input;
@@ -138,7 +138,7 @@ Result<WorkFile> prepare_work_file(const std::string& input, const std::string& 
       return wf;
     }
   }
-  BTFC_ASSIGN_OR_RETURN(BtfDesc d, probe_btf(input));
+  const BtfDesc d = in.desc();
   const std::string fp = fingerprint(input);
   if (fs::exists(work_path, ec)) {
     auto old = BdiChunks::open(work_path);
@@ -163,7 +163,7 @@ Result<WorkFile> prepare_work_file(const std::string& input, const std::string& 
     std::snprintf(sbuf, sizeof sbuf, "%.9g", double(scale));
     const std::string xml = "<btfc_work scale=\"" + std::string(sbuf) + "\" " + fp + "/>";
     BTFC_ASSIGN_OR_RETURN(auto w, BdiWriter::create(work_path, d, lines, scale, xml));
-    Status s = fill(input, *w, d, max_bytes, progress);
+    Status s = fill(in, *w, d, max_bytes, progress);
     if (s.ok()) {
       BTFC_RETURN_IF_ERROR(w->finish());
       break;

@@ -21,6 +21,7 @@
 #include "core/btf.h"
 #include "core/progress.h"
 #include "formats/raw_btfc.h"
+#include "formats/reader.h"
 
 namespace btfc {
 
@@ -38,9 +39,10 @@ struct WorkFile {
 };
 
 // lines_per_chunk: texel rows per chunk of a newly built file (ooc_fmf.h sizes it);
-// max_bytes bounds the buffers of the building pass.
-Result<WorkFile> prepare_work_file(const std::string& input, const std::string& work_path, uint32_t lines_per_chunk,
-                                   size_t max_bytes, Progress* progress);
+// max_bytes bounds the buffers of the building pass. `input` is the opened input
+// (formats/reader.h): its shape, image-set plan or model are used as they are, not probed again.
+Result<WorkFile> prepare_work_file(BtfInput& input, const std::string& work_path, uint32_t lines_per_chunk, size_t max_bytes,
+                                   Progress* progress);
 
 // Decodes `model` band by band into an uncompressed BDI at `path` (written under a temporary
 // name, renamed when complete), holding at most about max_bytes of decoded values.

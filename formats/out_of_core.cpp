@@ -69,11 +69,26 @@ Result<OutOfCoreResult> compress_out_of_core(const OutOfCoreJob& job, Collective
   BTFC_RETURN_IF_ERROR(coll.agree(s));
   const StreamingEncoder& enc = *r.codec->streaming();
 
+  // The input, opened at most once per process (the caller's, when it opened it already).
+  std::unique_ptr<BtfInput> own;
+  auto input = [&]() -> Result<BtfInput*> {
+    if (job.opened) return job.opened;
+    if (!own) {
+      BTFC_ASSIGN_OR_RETURN(own, open_input(job.input));
+    }
+    return own.get();
+  };
+  auto shape = [&]() -> Result<BtfDesc> {
+    BTFC_ASSIGN_OR_RETURN(BtfInput * in, input());
+    return in->desc();
+  };
+
   // In place: a raw .btfc every process sees, that fits the page cache, whose chunks fit.
   uint32_t raw_lines = 0;
   std::string why_work;
-  if (job.work_file.empty() && is_raw_btfc_file(job.input)) {
-    auto d = probe_btf(job.input);
+  const bool raw = job.opened ? !job.opened->model() && !job.opened->image_set_plan() : is_raw_btfc_file(job.input);
+  if (job.work_file.empty() && raw) {
+    auto d = shape();
     auto plan = d.ok() ? enc.plan(r.params, d.value(), limit) : Result<StreamSizing>(d.status());
     std::error_code ec;
     const uint64_t raw_bytes = std::filesystem::file_size(job.input, ec), avail = mem_available_bytes();
@@ -97,7 +112,8 @@ Result<OutOfCoreResult> compress_out_of_core(const OutOfCoreJob& job, Collective
     s = Status{};
     if (root) {
       s = [&]() -> Status {
-        BTFC_ASSIGN_OR_RETURN(r.desc, probe_btf(job.input));
+        BTFC_ASSIGN_OR_RETURN(BtfInput * in, input());
+        r.desc = in->desc();
         BTFC_ASSIGN_OR_RETURN(StreamSizing plan, enc.plan(r.params, r.desc, limit));
         const uint32_t lines = stream_lines_per_chunk(r.desc, plan, limit);
         if (lines == 0)
@@ -109,7 +125,7 @@ Result<OutOfCoreResult> compress_out_of_core(const OutOfCoreJob& job, Collective
           work = job.temp_dir + "/.btfc-work-" + std::to_string(::getpid()) + ".btf";
           r.temp_work = work;
         }
-        BTFC_ASSIGN_OR_RETURN(r.work, prepare_work_file(job.input, work, lines, limit, job.progress));
+        BTFC_ASSIGN_OR_RETURN(r.work, prepare_work_file(*in, work, lines, limit, job.progress));
         if (r.work.path != work) r.temp_work.clear();  // the input itself is the working file
         if (!why_work.empty()) r.work.note = why_work + (r.work.note.empty() ? "" : "; " + r.work.note);
         if (!r.work.note.empty() && job.notes) std::cerr << "note: " << r.work.note << "\n";

@@ -19,6 +19,7 @@
 #include "core/chunks.h"
 #include "core/progress.h"
 #include "formats/btf_stream.h"
+#include "formats/reader.h"
 
 namespace btfc {
 
@@ -31,6 +32,9 @@ struct OutOfCoreJob {
   std::string temp_dir;   // where an automatic working file goes
   Progress* progress = nullptr;
   bool notes = true;      // print "note: ..." lines about the working file on stderr (process 0)
+  // The input as the caller opened it (formats/reader.h), or null: then it is opened here, once,
+  // by the processes that need its shape. Either way it is probed and opened once.
+  BtfInput* opened = nullptr;
 };
 
 struct OutOfCoreResult {

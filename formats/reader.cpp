@@ -55,6 +55,7 @@ class ImageSetInput final : public BtfInput {
   Result<std::unique_ptr<Model>> take_model() override {
     return invalid_argument(m_plan.path + ": an image set holds raw data, not a compressed model");
   }
+  const ImageSetPlan* image_set_plan() const override { return &m_plan; }
 
  private:
   ImageSetPlan m_plan;

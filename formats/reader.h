@@ -19,6 +19,8 @@
 
 namespace btfc {
 
+struct ImageSetPlan;  // formats/image_set.h
+
 // An opened input: its shape is known; its values are read on demand.
 class BtfInput {
  public:
@@ -32,6 +34,9 @@ class BtfInput {
   virtual const Model* model() const { return nullptr; }
   // Hands the model over (the input no longer has it); an error naming the path for raw data.
   virtual Result<std::unique_ptr<Model>> take_model() = 0;
+  // The plan an image set was opened with (its files, order, shape), else null: bounded-memory
+  // readers (formats/btf_stream.h) read its images in groups without planning it again.
+  virtual const ImageSetPlan* image_set_plan() const { return nullptr; }
 };
 
 struct BtfReader {

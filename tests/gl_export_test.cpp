@@ -8,12 +8,13 @@
 //   - the model's own eval at measured directions: the export adds only the half-float rounding
 //     of the stored values (rgba16f: relative 2^-11 per stored value), so the bound is derived
 //     from that (see half_bound()).
-// Codecs are looped over by name; one without an exporter yet is skipped, so a new exporter
-// is tested here as soon as its line is in codecs/registry.cpp. The measured maxima are
+// Codecs are looped over by name (all_cases()): a codec without a row of its own is run at its
+// default spec, so a new exporter is tested here as soon as its line is in codecs/registry.cpp. The measured maxima are
 // printed ("[gl] ...") and recorded as test properties.
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -71,6 +72,23 @@ const Case k_cases[] = {
     {"mlvq", "ldr", "mlvq:phi=8:theta=4:alpha=7:beta=7", 1, true, 1, false, 16},
     {"mlvq", "hdr", "mlvq:phi=8:theta=4:alpha=7:beta=7", 1e6f, true, 1, false, 16},
 };
+
+// The table above, plus every registered codec with an exporter that has no row there, at its
+// default spec on LDR and HDR data (linear decoder, half storage as exported): a new codec is
+// tested here as soon as its line is in codecs/registry.cpp (or, for the test-only codec,
+// tests/toy_codec/register.cpp, linked into this test too). Evaluated when the tests are
+// registered, after every static registration.
+std::vector<Case> all_cases() {
+  std::vector<Case> v(std::begin(k_cases), std::end(k_cases));
+  for (const CodecEntry& e : codec_registry()) {
+    if (!e.exporter) continue;
+    const std::string name = e.codec->name();
+    if (std::any_of(std::begin(k_cases), std::end(k_cases), [&](const Case& c) { return name == c.codec; })) continue;
+    v.push_back({e.codec->name(), "default_ldr", e.codec->name(), 1, true, 1, false});
+    v.push_back({e.codec->name(), "default_hdr", e.codec->name(), 1e6f, true, 1, false});
+  }
+  return v;
+}
 
 const Btf& synthetic(float scale) {
   static std::map<float, Btf> cache;  // node-based: references stay valid
@@ -236,7 +254,7 @@ TEST_P(GlExport, GpuMatchesEmulationAndModel) {
   if (!HasFailure()) fs::remove_all(dir);
 }
 
-INSTANTIATE_TEST_SUITE_P(Codecs, GlExport, ::testing::ValuesIn(k_cases),
+INSTANTIATE_TEST_SUITE_P(Codecs, GlExport, ::testing::ValuesIn(all_cases()),
                          [](const ::testing::TestParamInfo<Case>& i) { return std::string(i.param.codec) + "_" + i.param.name; });
 
 // The harness must be able to fail: an altered texture file, a broken shader and a manifest

@@ -45,14 +45,6 @@ int clusters_for(size_t texels, int components) {
   return int(std::clamp<size_t>(k, 1, 32));
 }
 
-// The spec a model records: clusters=0 replaced by the count used.
-std::string resolved_spec(const std::string& canonical, int clusters) {
-  const std::string key = ":clusters=0:";
-  const size_t at = canonical.find(key);
-  if (at == std::string::npos) return canonical;
-  return canonical.substr(0, at) + ":clusters=" + std::to_string(clusters) + ":" + canonical.substr(at + key.size());
-}
-
 Config config_from(const Params& p) {
   Config c{int(p.get_int("components")), p.get("precision") == "half", 0, int(p.get_int("sh_order"))};
   if (p.get("precision") == "q") c.bits = int(p.get_int("bits"));
@@ -377,8 +369,11 @@ class LpcaCodec final : public Codec {
     st.add("assign_seconds", fit.assign_seconds);
     if (fit.assign_exhaustive > 0) st.add("assign_scored_fraction", double(fit.assign_scored) / double(fit.assign_exhaustive));
     if (K < fo.clusters)
-      st.note("clusters", std::to_string(fo.clusters - K) + " of " + std::to_string(fo.clusters) + " clusters stayed empty (fewer texels than clusters)");
-    auto model = std::make_unique<LpcaModel>(d, resolved_spec(p.canonical(), fo.clusters), cfg, std::move(fit.cluster_of), std::move(fit.table), std::move(fit.weights),
+      st.note("clamped.clusters", "clusters=" + std::to_string(fo.clusters) + ": " + std::to_string(fo.clusters - K) + " of them stayed empty (fewer distinct texels than clusters); " +
+                                      std::to_string(K) + " used");
+    // The spec records the clusters used (clusters=0 resolved, empty ones dropped).
+    BTFC_ASSIGN_OR_RETURN(Params used, with_value(p, "clusters", std::to_string(K), k_params));
+    auto model = std::make_unique<LpcaModel>(d, used.canonical(), cfg, std::move(fit.cluster_of), std::move(fit.table), std::move(fit.weights),
                                              std::move(mean_scale), std::move(weight_scale));
     model->set_coded(std::move(coded));
     st.add("encode_seconds", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());

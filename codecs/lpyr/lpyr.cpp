@@ -153,6 +153,8 @@ struct Encoder {
     Phong ph;
     float chroma[2] = {0, 0};
     std::vector<float> f, next;
+    // One step per (channel, level): the PCAs dominate the time, the finest level most.
+    if (ctx.progress) ctx.progress->start("lpyr pyramid and PCA", uint64_t(3 * (lmax + 1)));
     for (int c = 0; c < 3; ++c) {
       // One channel's pyramid at a time bounds the memory at input + 1.33 x input / 3.
       f.assign(n0 * dd, 0.0f);
@@ -215,15 +217,16 @@ struct Encoder {
       BTFC_ASSIGN_OR_RETURN(Block b, pca(f.data(), dd, nt, comps_at(lmax, c), "", center.data(), lmax, c, !phong));
       levels[size_t(lmax)].mean_stored[c] = !phong;
       levels[size_t(lmax)].ch[c] = std::move(b);
+      if (ctx.progress) ctx.progress->advance();
     }
+    if (ctx.progress) ctx.progress->finish();
     f = {}, next = {};
     stats.add("encode_seconds", std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count());
     Config cfg{p.get("precision") == "half", p.get("precision") == "q" ? int(p.get_int("bits")) : 0};
-    // The spec records the levels used (levels=0 resolved, as lpca's clusters=0).
-    std::string spec = p.canonical();
-    if (const size_t at = spec.find(":levels=0:"); at != std::string::npos)
-      spec = spec.substr(0, at) + ":levels=" + std::to_string(lmax + 1) + spec.substr(at + 9);
-    auto model = std::make_unique<LpyrModel>(d, spec, cfg, std::move(levels), phong, ph, chroma);
+    // The spec records the levels used (levels=0 resolved, as lpca's clusters=0; levels beyond
+    // the texture clamped).
+    BTFC_ASSIGN_OR_RETURN(Params used, with_value(p, "levels", std::to_string(lmax + 1), k_params));
+    auto model = std::make_unique<LpyrModel>(d, used.canonical(), cfg, std::move(levels), phong, ph, chroma);
     ModelStats& ms = model->mutable_stats();
     ms.numbers.insert(ms.numbers.begin(), stats.numbers.begin(), stats.numbers.end());
     ms.notes.insert(ms.notes.begin(), stats.notes.begin(), stats.notes.end());
