@@ -216,6 +216,7 @@ int cmd_render(const Global& g, const RenderArgs& a) {
     img = render(btf->desc(), btf_evaluator(btf.value()), s);
   }
   if (!img.ok()) return fail(g, img.status().with_context(a.in));
+  tone_map(img.value(), a.exposure, a.tonemap == "reinhard" ? ToneMap::reinhard : ToneMap::none);
   Status st = std::filesystem::path(a.out).extension() == ".exr" ? write_rgb_exr(a.out, img->width, img->height, img->rgb)
                                                                    : write_rgb_image(a.out, img.value());
   if (!st.ok()) return fail(g, st);

@@ -102,6 +102,8 @@ struct RenderArgs {
   std::string env;                 // lat-long EXR: environment lighting
   double intensity = 1;
   int size = 256, tiles = 1;
+  double exposure = 0;             // EV: values x 2^exposure
+  std::string tonemap = "none";    // none | reinhard
 };
 
 // Applies --device (auto | cpu | cl) to the process (core/cl_runtime.h).

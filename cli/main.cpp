@@ -182,6 +182,9 @@ int main(int argc, char** argv) {
   rend->add_option("--intensity", rn.intensity, "light scale")->check(CLI::Range(0.0, 1e30));
   rend->add_option("--size", rn.size, "sphere image size in pixels")->check(CLI::Range(1, 8192));
   rend->add_option("--tiles", rn.tiles, "sphere: texture repeats in theta (twice as many in phi)")->check(CLI::Range(1, 1024));
+  rend->add_option("--exposure", rn.exposure, "exposure in stops: values x 2^EV (PNG and EXR)")->check(CLI::Range(-64.0, 64.0));
+  rend->add_option("--tonemap", rn.tonemap, "none (a PNG clips at 1) or reinhard (L / (1 + L) per pixel: HDR highlights stay visible)")
+      ->check(CLI::IsMember({"none", "reinhard"}));
   rend->callback([&] { code = cmd_render(g, rn); });
 
   add_export_commands(app, g, code);

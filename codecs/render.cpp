@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <memory>
 
 #include "core/sh.h"  // hemisphere_cell_weights: the same quadrature lpca's SH projection uses
@@ -83,7 +84,8 @@ struct Shading {
   const RenderSettings& s;
   const DirectionSet& lights;
   const std::vector<double>& cell_w;  // environment quadrature
-  Status shade(Accumulator& acc, size_t pixel, int x, int y, V3 p, V3 t, V3 b, V3 n) const {
+  // `scale` weights this texel's share of the pixel (bilinear texture filtering).
+  Status shade(Accumulator& acc, size_t pixel, int x, int y, V3 p, V3 t, V3 b, V3 n, double scale = 1) const {
     auto local = [&](V3 d) { return V3{dot(d, t), dot(d, b), dot(d, n)}; };
     const V3 wv = local(normalize(v3(s.view)));
     if (wv.z <= 0) return {};
@@ -93,13 +95,13 @@ struct Shading {
         double L[3];
         env_lookup(s.environment, wl.x * t + wl.y * b + wl.z * n, L);
         if (L[0] == 0 && L[1] == 0 && L[2] == 0) continue;
-        for (double& c : L) c *= cell_w[l] * s.intensity;
+        for (double& c : L) c *= cell_w[l] * s.intensity * scale;
         BTFC_RETURN_IF_ERROR(acc.add(pixel, x, y, wl, wv, L));
       }
       return {};
     }
     V3 dir = normalize(v3(s.light));
-    double e = s.intensity;
+    double e = s.intensity * scale;
     if (s.light_kind == RenderSettings::LightKind::point) {
       const V3 d = s.distance * dir - p;
       const double r = std::sqrt(dot(d, d));
@@ -190,20 +192,46 @@ Result<RgbImage> render(const BtfDesc& desc, const BtfEvaluator& eval, const Ren
   const V3 v = normalize(v3(s.view));
   const V3 hint = std::abs(v.z) > 0.99 ? V3{0, 1, 0} : V3{0, 0, 1};
   const V3 right = normalize(cross(hint, v)), up = cross(v, right);
+  // The texture's axis is the screen's up: the camera faces the sphere's equator and the
+  // texture's poles sit at the top and bottom of the silhouette, so the tangent frame is
+  // continuous over everything visible. (With the axis towards the camera every texture column
+  // met at the disc's centre: a pinwheel of wedges, issue 21.) Texels are filtered bilinearly.
   for (int j = 0; j < s.size; ++j)
     for (int i = 0; i < s.size; ++i) {
       const double px = (i + 0.5) / s.size * 2 - 1, py = 1 - (j + 0.5) / s.size * 2, r2 = px * px + py * py;
       if (r2 >= 1) continue;
       const V3 n = normalize(px * right + py * up + std::sqrt(1 - r2) * v);
-      const double th = std::acos(std::clamp(n.z, -1.0, 1.0)), ph = std::atan2(n.y, n.x);
-      const double u = (ph / (2 * k_pi) + 0.5) * 2 * s.tiles, w = th / k_pi * s.tiles;
-      const int tx = std::min(desc.width - 1, int((u - std::floor(u)) * desc.width));
-      const int ty = std::min(desc.height - 1, int((w - std::floor(w)) * desc.height));
-      const V3 t{-std::sin(ph), std::cos(ph), 0}, b = cross(n, t);
-      BTFC_RETURN_IF_ERROR(shading.shade(acc, size_t(j) * size_t(s.size) + size_t(i), tx, ty, n, t, b, n));
+      const double th = std::acos(std::clamp(dot(n, up), -1.0, 1.0)), ph = std::atan2(dot(n, right), dot(n, v));
+      const V3 tt = cross(up, n);
+      if (dot(tt, tt) < 1e-18) continue;  // exactly at a texture pole (on the silhouette)
+      const V3 t = normalize(tt), b = cross(n, t);
+      // Texture coordinates in texels (2 tiles around, 1 from pole to pole), wrapped; the
+      // texture's centre faces the camera, its edges meet at the silhouette.
+      const double fu = (ph / k_pi * s.tiles + 0.5) * desc.width - 0.5, fv = th / k_pi * s.tiles * desc.height - 0.5;
+      const double x0 = std::floor(fu), y0 = std::floor(fv), ax = fu - x0, ay = fv - y0;
+      for (int dy = 0; dy < 2; ++dy)
+        for (int dx = 0; dx < 2; ++dx) {
+          const double wgt = (dx ? ax : 1 - ax) * (dy ? ay : 1 - ay);
+          if (wgt == 0) continue;
+          const int tx = int(((int64_t(x0) + dx) % desc.width + desc.width) % desc.width);
+          const int ty = int(((int64_t(y0) + dy) % desc.height + desc.height) % desc.height);
+          BTFC_RETURN_IF_ERROR(shading.shade(acc, size_t(j) * size_t(s.size) + size_t(i), tx, ty, n, t, b, n, wgt));
+        }
     }
   BTFC_RETURN_IF_ERROR(acc.flush());
   return img;
+}
+
+void tone_map(RgbImage& img, double exposure_ev, ToneMap curve) {
+  const float k = float(std::exp2(exposure_ev));
+  for (size_t i = 0; i + 2 < img.rgb.size(); i += 3) {
+    float* p = img.rgb.data() + i;
+    for (int c = 0; c < 3; ++c) p[c] *= k;
+    if (curve != ToneMap::reinhard) continue;
+    const float L = 0.2126f * p[0] + 0.7152f * p[1] + 0.0722f * p[2];
+    const float f = L > 0 ? 1.0f / (1.0f + L) : 1.0f;
+    for (int c = 0; c < 3; ++c) p[c] *= f;
+  }
 }
 
 namespace {

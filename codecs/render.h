@@ -10,9 +10,12 @@
 //    texture space, not foreshortened). A point light at `light * distance` (sample widths) gives
 //    each texel its own light direction and an irradiance falloff (distance / r)^2, 1 at the centre.
 //  - sphere: a unit sphere seen by an orthographic camera from `view` (world), `size` x `size`
-//    pixels, background 0. The texture wraps around it: u = phi / 2pi (2 `tiles` repeats),
-//    v = theta / pi (`tiles` repeats), nearest texel. The local frame at a point is t = d/dphi,
-//    b = n x t, n; light and view are brought into it (below the local horizon: no light / black).
+//    pixels, background 0. The texture wraps around it about the screen's up axis (the camera
+//    faces the equator; the texture's poles are at the top and bottom of the silhouette):
+//    u = phi / pi + 1/2 (2 `tiles` repeats, the texture's centre facing the camera), v = theta / pi (`tiles`
+//    repeats, theta from the up axis), texels filtered bilinearly. The local frame at a point
+//    is t = d/dphi (continuous over the visible half), b = n x t, n; light and view are brought
+//    into it (below the local horizon: no light / black).
 //  - environment: a lat-long RGB image in world coordinates (row 0 at the zenith +z, phi from +x;
 //    the layout of codecs/lpca/lpca.h), integrated over the measured light directions with their
 //    hemisphere-cell solid angles (the data already contains the cosine factor):
@@ -56,6 +59,12 @@ struct RenderSettings {
 // Errors: view below the flat sample's horizon, empty or non-finite environment, bad sizes,
 // or whatever the evaluator reports.
 Result<RgbImage> render(const BtfDesc& desc, const BtfEvaluator& eval, const RenderSettings& s);
+
+// For display: exposure (values x 2^exposure_ev), then an optional tone curve. `reinhard` maps
+// each pixel's luminance L to L / (1 + L), keeping its colour, so the highlights of HDR data stay
+// visible in an 8-bit PNG; `none` leaves the values (a PNG then clips at 1).
+enum class ToneMap { none, reinhard };
+void tone_map(RgbImage& img, double exposure_ev, ToneMap curve);
 
 // SSIM of two renders on luminance, dynamic range = the reference's peak luminance (metrics.h).
 double render_ssim(const RgbImage& reference, const RgbImage& test);

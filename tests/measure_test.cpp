@@ -190,6 +190,51 @@ TEST(Render, SphereLitFromTheCameraCoversTheDisc) {
   EXPECT_EQ(img->rgb[0], 0.f);  // corner: background
 }
 
+TEST(Render, SphereTextureIsContinuousWhereverTheCameraLooks) {
+  // A ramp across the texture (value = (x + 0.5) / width, the same for every direction): on
+  // the visible sphere it must change smoothly. Seen from the top, the old mapping put a
+  // texture pole at the disc's centre, where every column met (a pinwheel: neighbouring pixels
+  // differed by up to the whole ramp).
+  Btf b = constant_btf(0.f, 16, 8);
+  const BtfDesc& d = b.desc();
+  for (int y = 0; y < d.height; ++y)
+    for (int x = 0; x < d.width; ++x) std::fill_n(b.abrdf(size_t(y) * 16 + size_t(x)), d.abrdf_size(), (x + 0.5f) / 16);
+  for (const Vec3& view : {Vec3{0, 0, 1}, dir_from_theta_phi(0.8, 2.0)}) {
+    RenderSettings s;
+    s.shape = RenderSettings::Shape::sphere;
+    s.size = 64, s.view = view, s.light = view;
+    auto img = render(d, btf_evaluator(b), s);
+    ASSERT_TRUE(img.ok()) << img.status().message();
+    // Within 0.7 of the radius: one pixel moves the texture by at most 16 / (pi 32 cos) texels
+    // horizontally (cos >= 0.71), the ramp 1/16 per texel; the BTF is constant in direction, so
+    // the light (from the camera) only scales by the local cosine, which changes slowly.
+    double jump = 0, seen = 0;
+    for (int j = 0; j < 64; ++j)
+      for (int i = 0; i + 1 < 64; ++i) {
+        const double px = (i + 0.5) / 32 - 1, py = 1 - (j + 0.5) / 32;
+        if (px * px + py * py > 0.49 || std::pow(px + 1.0 / 32, 2) + py * py > 0.49) continue;
+        const size_t k = (size_t(j) * 64 + size_t(i)) * 3;
+        jump = std::max(jump, double(std::abs(img->rgb[k + 3] - img->rgb[k])));
+        seen = std::max(seen, double(img->rgb[k]));
+      }
+    ASSERT_GT(seen, 0.2);
+    EXPECT_LT(jump, 0.03) << "view " << view.x << " " << view.y << " " << view.z;
+  }
+}
+
+TEST(Render, ToneMapKeepsHighlightsBelowWhite) {
+  RgbImage im{2, 1, {0.5f, 0.5f, 0.5f, 100.f, 50.f, 10.f}};
+  tone_map(im, 1.0, ToneMap::none);  // one stop up
+  EXPECT_FLOAT_EQ(im.rgb[0], 1.0f);
+  EXPECT_FLOAT_EQ(im.rgb[3], 200.f);
+  tone_map(im, 0.0, ToneMap::reinhard);
+  const float L = 0.2126f * im.rgb[3] + 0.7152f * im.rgb[4] + 0.0722f * im.rgb[5];
+  EXPECT_LT(L, 1.0f);
+  EXPECT_GT(L, 0.95f);
+  EXPECT_NEAR(im.rgb[3] / im.rgb[5], 10.0, 1e-4);  // colour kept
+  EXPECT_NEAR(im.rgb[0], 0.5f, 1e-6);               // L = 1 -> 1 / 2
+}
+
 TEST(Render, ModelRendersLikeItsDataAndEnvironmentMatchesLpcaRelight) {
   const Btf b = small_btf(10, 10);
   auto r = resolve_spec("lpca:clusters=1:components=60:precision=float:sh_order=12");
