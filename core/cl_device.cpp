@@ -1,9 +1,10 @@
 // The OpenCL side of the runtime (BTFC_OPENCL=ON): devices, context, queues, programs, kernels
 // and buffers, every call through the dlopen()ed table of core/cl_api.h. See cl_runtime.h.
-#include <cstdio>
 #include <cstdlib>
 #include <map>
 #include <mutex>
+#include <string>
+#include <vector>
 
 #include "core/cl_api.h"
 #include "core/cl_runtime.h"
