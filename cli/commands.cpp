@@ -110,7 +110,9 @@ void note_clamped(const Global& g, const std::string& input, const ModelStats& s
 
 void set_device(const std::string& choice) {
   auto c = ocl::parse_device_choice(choice);
-  if (c.ok()) ocl::set_device_choice(c.value());
+  // `auto` is the default: left to the process, so BTFC_FORCE_CPU=1 still forces the CPU path
+  // (setting it explicitly here had made the suite's CPU pass run the CLI tests on OpenCL).
+  if (c.ok() && c.value() != ocl::DeviceChoice::automatic) ocl::set_device_choice(c.value());
 }
 
 int cmd_devices(const Global& g) {

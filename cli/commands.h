@@ -106,7 +106,8 @@ struct RenderArgs {
   std::string tonemap = "none";    // none | reinhard
 };
 
-// Applies --device (auto | cpu | cl) to the process (core/cl_runtime.h).
+// Applies --device (auto | cpu | cl) to the process (core/cl_runtime.h); auto, the default, leaves
+// the process's choice (auto, or cpu under BTFC_FORCE_CPU=1).
 void set_device(const std::string& choice);
 
 int cmd_devices(const Global& g);

@@ -12,6 +12,8 @@ Layers, lowest first; a file may include its own layer and the ones below:
                     headers (codecs/*.h and codecs/<name>/<name>.h), not their internals
   cli/, mpi/        the programs: anything below, not each other
   bench/, tests/    anything
+OpenCL headers (<CL/...>) only in core/cl_api.h, and that only in the runtime's device half, so
+everything else builds without OpenCL (BTFC_OPENCL=OFF).
 The registry (codecs/registry.cpp) is the one framework file that includes codecs' main headers.
 """
 import os
@@ -19,6 +21,11 @@ import re
 import sys
 
 INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
+OPENCL_HEADER = re.compile(r'^\s*#\s*include\s+[<"]CL/', re.M)
+# OpenCL is optional and dlopen()ed (docs/ARCHITECTURE.md): only the runtime's API table includes
+# an OpenCL header, and only the runtime's device half includes that table.
+OPENCL_HEADER_FILES = ("core/cl_api.h",)
+OPENCL_API_USERS = ("core/cl_api.cpp", "core/cl_device.cpp")
 SOURCES = (".h", ".cpp", ".cl")
 
 
@@ -88,12 +95,16 @@ def main():
                 src = os.path.relpath(os.path.join(dirpath, f), root)
                 with open(os.path.join(root, src), encoding="utf-8") as fh:
                     text = fh.read()
+                if OPENCL_HEADER.search(text) and src not in OPENCL_HEADER_FILES:
+                    bad.append(f"{src}: includes an OpenCL header: only core/cl_api.h may (use core/cl_runtime.h)")
                 for m in INCLUDE.finditer(text):
                     dst = m.group(1)
                     if "/" not in dst:
                         continue  # same-folder or generated includes
                     checked += 1
                     why = allowed(src, dst)
+                    if dst == "core/cl_api.h" and src not in OPENCL_API_USERS:
+                        why = "core/cl_api.h (the dlopen()ed OpenCL table) is the runtime's own: use core/cl_runtime.h"
                     if why:
                         bad.append(f"{src}: #include \"{dst}\": {why}")
                 if "../shared/" in text:

@@ -192,3 +192,27 @@ TEST(OpenCL, DeviceChoiceParsing) {
   EXPECT_EQ(ocl::parse_device_choice("auto").value(), ocl::DeviceChoice::automatic);
   EXPECT_FALSE(ocl::parse_device_choice("gpu").ok());
 }
+
+// `cpu` never loads the OpenCL library (core/cl_runtime.h), though codecs with kernels run.
+// Runs in its own process under ctest (gtest_discover_tests), where nothing loaded it before.
+TEST(OpenCL, CpuChoiceNeverLoadsTheLibrary) {
+  if (ocl::library_loaded()) GTEST_SKIP() << "an earlier test of this process loaded OpenCL (run it alone, as ctest does)";
+  ocl::set_device_choice(ocl::DeviceChoice::cpu);
+  SynthOptions so;
+  so.width = 7, so.height = 5;
+  auto btf = synthesize_btf(so);
+  ASSERT_TRUE(btf.ok());
+  for (const char* spec : {"fmf:rank=3", "lpyr", "lpca:clusters=2:components=2"}) {
+    auto r = resolve_spec(spec);
+    Context ctx;
+    auto m = r->first->encode(btf.value(), r->second, ctx);
+    ASSERT_TRUE(m.ok()) << spec;
+    Btf out;
+    ASSERT_TRUE(m.value()->decode_all(out).ok()) << spec;
+  }
+  EXPECT_FALSE(ocl::Runtime::get().ok());
+  EXPECT_FALSE(ocl::list_devices().ok());
+  EXPECT_NE(ocl::device_summary().find("CPU path chosen"), std::string::npos);
+  EXPECT_FALSE(ocl::library_loaded());
+  ocl::set_device_choice(ocl::DeviceChoice::automatic);
+}

@@ -208,8 +208,8 @@ Result<std::shared_ptr<DeviceFactors>> DeviceFactors::upload(const PackedFactors
   auto d = std::shared_ptr<DeviceFactors>(new DeviceFactors());
   d->m = std::make_unique<Impl>();
   d->m->shape = f;
-  BTFC_ASSIGN_OR_RETURN(d->m->U, ocl::Buffer::create(*rt, f.U.size() * 4, f.U.data(), CL_MEM_READ_ONLY));
-  BTFC_ASSIGN_OR_RETURN(d->m->SxV, ocl::Buffer::create(*rt, f.SxV.size() * 4, f.SxV.data(), CL_MEM_READ_ONLY));
+  BTFC_ASSIGN_OR_RETURN(d->m->U, ocl::Buffer::create(*rt, f.U.size() * 4, f.U.data(), ocl::Access::read_only));
+  BTFC_ASSIGN_OR_RETURN(d->m->SxV, ocl::Buffer::create(*rt, f.SxV.size() * 4, f.SxV.data(), ocl::Access::read_only));
   return d;
 }
 
@@ -221,22 +221,16 @@ constexpr size_t k_slice = size_t(1) << 22;
 template <class Q>
 Status run_eval(const DeviceFactors::Impl& m, const char* kernel_name, std::span<const Q> q, float* out) {
   BTFC_ASSIGN_OR_RETURN(ocl::Runtime * rt, ocl::Runtime::get());
-  BTFC_ASSIGN_OR_RETURN(cl_command_queue queue, rt->queue());
-  BTFC_ASSIGN_OR_RETURN(cl_kernel k, rt->kernel("fmf", kernel_name));
+  BTFC_ASSIGN_OR_RETURN(ocl::Kernel k, rt->kernel("fmf", kernel_name));
   const PackedFactors& s = m.shape;
   for (size_t first = 0; first < q.size(); first += k_slice) {
     const size_t n = std::min(k_slice, q.size() - first);
-    BTFC_ASSIGN_OR_RETURN(ocl::Buffer qb, ocl::Buffer::wrap(*rt, n * sizeof(Q), const_cast<Q*>(q.data() + first), CL_MEM_READ_ONLY));
-    BTFC_ASSIGN_OR_RETURN(ocl::Buffer ob, ocl::Buffer::wrap(*rt, n * 12, out + 3 * first, CL_MEM_WRITE_ONLY));
-    cl_mem u = m.U.get(), sx = m.SxV.get(), qm = qb.get(), om = ob.get();
-    const cl_int C = s.C, nL = s.nL, rpb = s.rows_per_block, tex = s.texels, mode = s.mode, nn = cl_int(n);
-    int a = 0;
-    for (auto [ptr, size] : {std::pair<const void*, size_t>{&u, sizeof(cl_mem)}, {&sx, sizeof(cl_mem)}, {&C, 4}, {&nL, 4},
-                             {&rpb, 4}, {&tex, 4}, {&mode, 4}, {&qm, sizeof(cl_mem)}, {&nn, 4}, {&om, sizeof(cl_mem)}})
-      BTFC_CL_CHECK(clSetKernelArg(k, a++, size, ptr), "clSetKernelArg");
+    BTFC_ASSIGN_OR_RETURN(ocl::Buffer qb, ocl::Buffer::wrap(*rt, n * sizeof(Q), const_cast<Q*>(q.data() + first), ocl::Access::read_only));
+    BTFC_ASSIGN_OR_RETURN(ocl::Buffer ob, ocl::Buffer::wrap(*rt, n * 12, out + 3 * first, ocl::Access::write_only));
+    BTFC_RETURN_IF_ERROR(k.args(m.U, m.SxV, s.C, s.nL, s.rows_per_block, s.texels, s.mode, qb, int32_t(n), ob));
     const size_t local = 64, global = (n + local - 1) / local * local;
-    BTFC_CL_CHECK(clEnqueueNDRangeKernel(queue, k, 1, nullptr, &global, &local, 0, nullptr, nullptr), kernel_name);
-    BTFC_RETURN_IF_ERROR(ob.sync_to_host(queue, n * 12));
+    BTFC_RETURN_IF_ERROR(k.launch(1, &global, &local, kernel_name));
+    BTFC_RETURN_IF_ERROR(ob.sync_to_host(n * 12));
   }
   return {};
 }
@@ -259,26 +253,18 @@ Status DeviceFactors::eval_pair(const btfc_fmf_query& pair, std::span<const int>
     return eval_interp(q, out);
   }
   BTFC_ASSIGN_OR_RETURN(ocl::Runtime * rt, ocl::Runtime::get());
-  BTFC_ASSIGN_OR_RETURN(cl_command_queue queue, rt->queue());
-  BTFC_ASSIGN_OR_RETURN(cl_kernel k, rt->kernel("fmf", "fmf_eval_pair_rgb"));
+  BTFC_ASSIGN_OR_RETURN(ocl::Kernel k, rt->kernel("fmf", "fmf_eval_pair_rgb"));
   std::vector<float> Ub(size_t(3) * s.C);
   blend_pair(s, pair, Ub.data());
-  BTFC_ASSIGN_OR_RETURN(ocl::Buffer ub, ocl::Buffer::create(*rt, Ub.size() * 4, Ub.data(), CL_MEM_READ_ONLY));
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer ub, ocl::Buffer::create(*rt, Ub.size() * 4, Ub.data(), ocl::Access::read_only));
   for (size_t first = 0; first < texels.size(); first += k_slice) {
     const size_t n = std::min(k_slice, texels.size() - first);
-    BTFC_ASSIGN_OR_RETURN(ocl::Buffer tb, ocl::Buffer::wrap(*rt, n * 4, const_cast<int*>(texels.data() + first), CL_MEM_READ_ONLY));
-    BTFC_ASSIGN_OR_RETURN(ocl::Buffer ob, ocl::Buffer::wrap(*rt, n * 12, out + 3 * first, CL_MEM_WRITE_ONLY));
-    cl_mem a0 = ub.get(), a1 = m->SxV.get(), a3 = tb.get(), a5 = ob.get();
-    const cl_int C = s.C, nn = cl_int(n);
-    BTFC_CL_CHECK(clSetKernelArg(k, 0, sizeof(cl_mem), &a0), "arg");
-    BTFC_CL_CHECK(clSetKernelArg(k, 1, sizeof(cl_mem), &a1), "arg");
-    BTFC_CL_CHECK(clSetKernelArg(k, 2, 4, &C), "arg");
-    BTFC_CL_CHECK(clSetKernelArg(k, 3, sizeof(cl_mem), &a3), "arg");
-    BTFC_CL_CHECK(clSetKernelArg(k, 4, 4, &nn), "arg");
-    BTFC_CL_CHECK(clSetKernelArg(k, 5, sizeof(cl_mem), &a5), "arg");
+    BTFC_ASSIGN_OR_RETURN(ocl::Buffer tb, ocl::Buffer::wrap(*rt, n * 4, const_cast<int*>(texels.data() + first), ocl::Access::read_only));
+    BTFC_ASSIGN_OR_RETURN(ocl::Buffer ob, ocl::Buffer::wrap(*rt, n * 12, out + 3 * first, ocl::Access::write_only));
+    BTFC_RETURN_IF_ERROR(k.args(ub, m->SxV, s.C, tb, int32_t(n), ob));
     const size_t local = 64, global = (n + local - 1) / local * local;
-    BTFC_CL_CHECK(clEnqueueNDRangeKernel(queue, k, 1, nullptr, &global, &local, 0, nullptr, nullptr), "fmf_eval_pair_rgb");
-    BTFC_RETURN_IF_ERROR(ob.sync_to_host(queue, n * 12));
+    BTFC_RETURN_IF_ERROR(k.launch(1, &global, &local, "fmf_eval_pair_rgb"));
+    BTFC_RETURN_IF_ERROR(ob.sync_to_host(n * 12));
   }
   return {};
 }
@@ -292,10 +278,9 @@ Status DeviceFactors::eval_batch(std::span<const btfc_fmf_query> q, float* out) 
 Status DeviceFactors::decode(std::span<const int> texels, std::span<const int> lights, std::span<const int> views,
                              float* out) const {
   BTFC_ASSIGN_OR_RETURN(ocl::Runtime * rt, ocl::Runtime::get());
-  BTFC_ASSIGN_OR_RETURN(cl_command_queue queue, rt->queue());
   const PackedFactors& s = m->shape;
   const bool rgb = s.mode == BTFC_FMF_RGB;
-  BTFC_ASSIGN_OR_RETURN(cl_kernel k, rt->kernel("fmf", rgb ? "fmf_decode_rgb" : "fmf_decode_dfmf"));
+  BTFC_ASSIGN_OR_RETURN(ocl::Kernel k, rt->kernel("fmf", rgb ? "fmf_decode_rgb" : "fmf_decode_dfmf"));
   const size_t nl = lights.size(), nv = views.size(), dirs = nl * nv, rows = 3 * dirs, C = size_t(s.C);
   // The selected U rows, transposed per block (kernel reads 16 consecutive rows as a float16).
   const size_t cols = rgb ? rows : dirs;  // columns of Ut per block
@@ -312,7 +297,7 @@ Status DeviceFactors::decode(std::span<const int> texels, std::span<const int> l
               Ut[(size_t(b) * C + kk) * cols + dst_col] = U[(size_t(b) * s.rows_per_block + src_row) * C + kk];
           }
   }
-  BTFC_ASSIGN_OR_RETURN(ocl::Buffer utb, ocl::Buffer::create(*rt, Ut.size() * 4, Ut.data(), CL_MEM_READ_ONLY));
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer utb, ocl::Buffer::create(*rt, Ut.size() * 4, Ut.data(), ocl::Access::read_only));
   // Texel blocks keep the output buffer near 128 MiB.
   const size_t per_block = std::max<size_t>(1, (size_t(128) << 20) / (rows * 4));
   std::vector<float> SX;
@@ -323,20 +308,13 @@ Status DeviceFactors::decode(std::span<const int> texels, std::span<const int> l
     for (int b = 0; b < s.blocks; ++b)
       for (size_t i = 0; i < n; ++i)
         std::copy_n(SXall.data() + (size_t(b) * s.texels + size_t(texels[first + i])) * C, C, SX.data() + (size_t(b) * n + i) * C);
-    BTFC_ASSIGN_OR_RETURN(ocl::Buffer sxb, ocl::Buffer::create(*rt, SX.size() * 4, SX.data(), CL_MEM_READ_ONLY));
-    BTFC_ASSIGN_OR_RETURN(ocl::Buffer ob, ocl::Buffer::wrap(*rt, n * rows * 4, out + first * rows, CL_MEM_WRITE_ONLY));
-    cl_mem a0 = utb.get(), a1 = sxb.get(), a5 = ob.get();
-    const cl_int Ci = cl_int(C), colsi = cl_int(cols), ni = cl_int(n);
-    BTFC_CL_CHECK(clSetKernelArg(k, 0, sizeof(cl_mem), &a0), "arg");
-    BTFC_CL_CHECK(clSetKernelArg(k, 1, sizeof(cl_mem), &a1), "arg");
-    BTFC_CL_CHECK(clSetKernelArg(k, 2, 4, &Ci), "arg");
-    BTFC_CL_CHECK(clSetKernelArg(k, 3, 4, &colsi), "arg");
-    BTFC_CL_CHECK(clSetKernelArg(k, 4, 4, &ni), "arg");
-    BTFC_CL_CHECK(clSetKernelArg(k, 5, sizeof(cl_mem), &a5), "arg");
+    BTFC_ASSIGN_OR_RETURN(ocl::Buffer sxb, ocl::Buffer::create(*rt, SX.size() * 4, SX.data(), ocl::Access::read_only));
+    BTFC_ASSIGN_OR_RETURN(ocl::Buffer ob, ocl::Buffer::wrap(*rt, n * rows * 4, out + first * rows, ocl::Access::write_only));
+    BTFC_RETURN_IF_ERROR(k.args(utb, sxb, int32_t(C), int32_t(cols), int32_t(n), ob));
     // rgb: each work-item does 16 rows x 4 texels; dfmf: 16 directions x 1 texel.
     const size_t global[2] = {(cols + 15) / 16, rgb ? (n + 3) / 4 : n};
-    BTFC_CL_CHECK(clEnqueueNDRangeKernel(queue, k, 2, nullptr, global, nullptr, 0, nullptr, nullptr), "fmf_decode");
-    BTFC_RETURN_IF_ERROR(ob.sync_to_host(queue, n * rows * 4));
+    BTFC_RETURN_IF_ERROR(k.launch(2, global, nullptr, "fmf_decode"));
+    BTFC_RETURN_IF_ERROR(ob.sync_to_host(n * rows * 4));
   }
   return {};
 }

@@ -12,8 +12,6 @@
 namespace btfc::lpca_cl {
 namespace {
 
-using ocl::set_arg;
-
 // Directions per lpca_project launch: a group's 8 texel chunks (32 KB) stay in L1 while it
 // runs through its candidates, each cluster's chunk (36 KB at 8 components) in L2.
 constexpr int64_t k_chunk = 1024;
@@ -73,39 +71,25 @@ Status project_cl(const ProjectionTable& tb, const GroupBatch& b, float* P) {
   const size_t groups = b.groups(), pairs = b.cand.size();
   if (groups == 0 || pairs == 0) return {};
   BTFC_ASSIGN_OR_RETURN(ocl::Runtime * rt, ocl::Runtime::get());
-  BTFC_ASSIGN_OR_RETURN(cl_command_queue queue, rt->queue());
-  BTFC_ASSIGN_OR_RETURN(cl_kernel kp, rt->kernel("lpca", "lpca_project"));
+  BTFC_ASSIGN_OR_RETURN(ocl::Kernel kp, rt->kernel("lpca", "lpca_project"));
   const size_t d = size_t(tb.d), stride = size_t(tb.V);
-  BTFC_ASSIGN_OR_RETURN(ocl::Buffer xb, ocl::Buffer::wrap(*rt, size_t(b.nt) * d * 4, const_cast<float*>(b.X), CL_MEM_READ_ONLY));
-  BTFC_ASSIGN_OR_RETURN(ocl::Buffer wb, ocl::Buffer::wrap(*rt, tb.vectors.size() * 4, const_cast<float*>(tb.vectors.data()), CL_MEM_READ_ONLY));
-  BTFC_ASSIGN_OR_RETURN(ocl::Buffer tx, ocl::Buffer::create(*rt, b.texels.size() * 4, b.texels.data(), CL_MEM_READ_ONLY));
-  BTFC_ASSIGN_OR_RETURN(ocl::Buffer co, ocl::Buffer::create(*rt, b.cand_off.size() * 4, b.cand_off.data(), CL_MEM_READ_ONLY));
-  BTFC_ASSIGN_OR_RETURN(ocl::Buffer ca, ocl::Buffer::create(*rt, pairs * 4, b.cand.data(), CL_MEM_READ_ONLY));
-  BTFC_ASSIGN_OR_RETURN(ocl::Buffer pb, ocl::Buffer::wrap(*rt, pairs * 8 * stride * 4, P, CL_MEM_READ_WRITE));
-  const cl_mem xm = xb.get(), wm = wb.get(), tm = tx.get(), om = co.get(), cm = ca.get(), pm = pb.get();
-  const cl_int di = cl_int(d), Vi = tb.V, gi = cl_int(groups);
+  const auto in = ocl::Access::read_only;
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer xb, ocl::Buffer::wrap(*rt, size_t(b.nt) * d * 4, const_cast<float*>(b.X), in));
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer wb, ocl::Buffer::wrap(*rt, tb.vectors.size() * 4, const_cast<float*>(tb.vectors.data()), in));
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer tx, ocl::Buffer::create(*rt, b.texels.size() * 4, b.texels.data(), in));
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer co, ocl::Buffer::create(*rt, b.cand_off.size() * 4, b.cand_off.data(), in));
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer ca, ocl::Buffer::create(*rt, pairs * 4, b.cand.data(), in));
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer pb, ocl::Buffer::wrap(*rt, pairs * 8 * stride * 4, P, ocl::Access::read_write));
   for (size_t r0 = 0; r0 < d; r0 += size_t(k_chunk)) {
-    const cl_int r0i = cl_int(r0), rci = cl_int(std::min<size_t>(size_t(k_chunk), d - r0)), first = r0 == 0;
-    int a = 0;
-    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, xm, "lpca_project"));
-    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, di, "lpca_project"));
-    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, tm, "lpca_project"));
-    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, om, "lpca_project"));
-    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, cm, "lpca_project"));
-    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, wm, "lpca_project"));
-    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, Vi, "lpca_project"));
-    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, r0i, "lpca_project"));
-    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, rci, "lpca_project"));
-    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, gi, "lpca_project"));
-    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, first, "lpca_project"));
-    BTFC_RETURN_IF_ERROR(set_arg(kp, a++, pm, "lpca_project"));
+    const int32_t rc = int32_t(std::min<size_t>(size_t(k_chunk), d - r0)), first = r0 == 0;
+    BTFC_RETURN_IF_ERROR(kp.args(xb, int32_t(d), tx, co, ca, wb, int32_t(tb.V), int32_t(r0), rc, int32_t(groups), first, pb));
     // One work-item per work-group: groups differ in their candidate counts, and PoCL's own
     // choice (a large divisor of the global size) left one of the 2 cores idle for much of a
     // launch (assignment 1.3-1.6x slower at 128^2 texels).
     const size_t global = groups, local = 1;
-    BTFC_CL_CHECK(clEnqueueNDRangeKernel(queue, kp, 1, nullptr, &global, &local, 0, nullptr, nullptr), "lpca_project");
+    BTFC_RETURN_IF_ERROR(kp.launch(1, &global, &local, "lpca_project"));
   }
-  return pb.sync_to_host(queue, pairs * 8 * stride * 4);
+  return pb.sync_to_host(pairs * 8 * stride * 4);
 }
 
 Status project(const ProjectionTable& t, const GroupBatch& b, float* P) {
@@ -132,25 +116,18 @@ void relight_reference(std::span<const uint32_t> cluster, const float* W, int c,
 
 Status relight_cl(std::span<const uint32_t> cluster, const float* W, int c, const float* L, size_t L_rows, float* out) {
   BTFC_ASSIGN_OR_RETURN(ocl::Runtime * rt, ocl::Runtime::get());
-  BTFC_ASSIGN_OR_RETURN(cl_command_queue queue, rt->queue());
-  BTFC_ASSIGN_OR_RETURN(cl_kernel k, rt->kernel("lpca", "lpca_relight"));
+  BTFC_ASSIGN_OR_RETURN(ocl::Kernel k, rt->kernel("lpca", "lpca_relight"));
   const size_t n = cluster.size();
   if (n == 0) return {};
-  BTFC_ASSIGN_OR_RETURN(ocl::Buffer cb, ocl::Buffer::wrap(*rt, n * 4, const_cast<uint32_t*>(cluster.data()), CL_MEM_READ_ONLY));
-  BTFC_ASSIGN_OR_RETURN(ocl::Buffer wb, ocl::Buffer::wrap(*rt, std::max<size_t>(1, n * size_t(c)) * 4, const_cast<float*>(W), CL_MEM_READ_ONLY));
-  BTFC_ASSIGN_OR_RETURN(ocl::Buffer lb, ocl::Buffer::create(*rt, L_rows * 3 * 4, L, CL_MEM_READ_ONLY));
-  BTFC_ASSIGN_OR_RETURN(ocl::Buffer ob, ocl::Buffer::wrap(*rt, n * 12, out, CL_MEM_WRITE_ONLY));
-  const cl_mem cm = cb.get(), wm = wb.get(), lm = lb.get(), om = ob.get();
-  const cl_int ci = c, ni = cl_int(n);
-  BTFC_RETURN_IF_ERROR(set_arg(k, 0, cm, "lpca_relight"));
-  BTFC_RETURN_IF_ERROR(set_arg(k, 1, wm, "lpca_relight"));
-  BTFC_RETURN_IF_ERROR(set_arg(k, 2, ci, "lpca_relight"));
-  BTFC_RETURN_IF_ERROR(set_arg(k, 3, lm, "lpca_relight"));
-  BTFC_RETURN_IF_ERROR(set_arg(k, 4, ni, "lpca_relight"));
-  BTFC_RETURN_IF_ERROR(set_arg(k, 5, om, "lpca_relight"));
+  const auto in = ocl::Access::read_only;
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer cb, ocl::Buffer::wrap(*rt, n * 4, const_cast<uint32_t*>(cluster.data()), in));
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer wb, ocl::Buffer::wrap(*rt, std::max<size_t>(1, n * size_t(c)) * 4, const_cast<float*>(W), in));
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer lb, ocl::Buffer::create(*rt, L_rows * 3 * 4, L, in));
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer ob, ocl::Buffer::wrap(*rt, n * 12, out, ocl::Access::write_only));
+  BTFC_RETURN_IF_ERROR(k.args(cb, wb, int32_t(c), lb, int32_t(n), ob));
   const size_t local = 64, global = (n + local - 1) / local * local;
-  BTFC_CL_CHECK(clEnqueueNDRangeKernel(queue, k, 1, nullptr, &global, &local, 0, nullptr, nullptr), "lpca_relight");
-  return ob.sync_to_host(queue, n * 12);
+  BTFC_RETURN_IF_ERROR(k.launch(1, &global, &local, "lpca_relight"));
+  return ob.sync_to_host(n * 12);
 }
 
 Status relight(std::span<const uint32_t> cluster, const float* W, int c, const float* L, size_t L_rows, float* out) {

@@ -12,8 +12,6 @@ namespace {
 
 constexpr size_t k_tile_bytes = size_t(256) << 20;
 
-using ocl::set_arg;
-
 Status check_sizes(int w, int h, size_t d) {
   if (w <= 0 || h <= 0 || d == 0 || d > size_t(1) << 30 || size_t(w) * d * 4 * 3 > k_tile_bytes)
     return Status(StatusCode::device_error, "lpyr kernels: level " + std::to_string(w) + "x" + std::to_string(h) + " with " +
@@ -27,8 +25,7 @@ Status check_sizes(int w, int h, size_t d) {
 Status reduce_cl(const float* src, int w, int h, size_t d, float* dst) {
   BTFC_RETURN_IF_ERROR(check_sizes(w, h, d));
   BTFC_ASSIGN_OR_RETURN(ocl::Runtime * rt, ocl::Runtime::get());
-  BTFC_ASSIGN_OR_RETURN(cl_command_queue queue, rt->queue());
-  BTFC_ASSIGN_OR_RETURN(cl_kernel k, rt->kernel("lpyr", "lpyr_reduce"));
+  BTFC_ASSIGN_OR_RETURN(ocl::Kernel k, rt->kernel("lpyr", "lpyr_reduce"));
   const int w2 = (w + 1) / 2, h2 = (h + 1) / 2;
   const size_t row_in = size_t(w) * d * 4;
   // Output rows per tile: the tile's 2 R + 1 input rows stay under k_tile_bytes.
@@ -37,24 +34,14 @@ Status reduce_cl(const float* src, int w, int h, size_t d, float* dst) {
     const int rows = std::min(R, h2 - y0);
     const int ys0 = std::max(0, 2 * y0 - 1), ys1 = std::min(h - 1, 2 * (y0 + rows - 1) + 1);
     BTFC_ASSIGN_OR_RETURN(ocl::Buffer sb, ocl::Buffer::wrap(*rt, size_t(ys1 - ys0 + 1) * row_in,
-                                                            const_cast<float*>(src + size_t(ys0) * size_t(w) * d), CL_MEM_READ_ONLY));
+                                                            const_cast<float*>(src + size_t(ys0) * size_t(w) * d), ocl::Access::read_only));
     const size_t out_bytes = size_t(rows) * size_t(w2) * d * 4;
     float* o = dst + size_t(y0) * size_t(w2) * d;
-    BTFC_ASSIGN_OR_RETURN(ocl::Buffer ob, ocl::Buffer::wrap(*rt, out_bytes, o, CL_MEM_WRITE_ONLY));
-    const cl_mem sm = sb.get(), om = ob.get();
-    const cl_int di = cl_int(d);
-    int a = 0;
-    BTFC_RETURN_IF_ERROR(set_arg(k, a++, sm));
-    BTFC_RETURN_IF_ERROR(set_arg(k, a++, cl_int(ys0)));
-    BTFC_RETURN_IF_ERROR(set_arg(k, a++, cl_int(w)));
-    BTFC_RETURN_IF_ERROR(set_arg(k, a++, cl_int(h)));
-    BTFC_RETURN_IF_ERROR(set_arg(k, a++, di));
-    BTFC_RETURN_IF_ERROR(set_arg(k, a++, om));
-    BTFC_RETURN_IF_ERROR(set_arg(k, a++, cl_int(y0)));
-    BTFC_RETURN_IF_ERROR(set_arg(k, a++, cl_int(rows)));
+    BTFC_ASSIGN_OR_RETURN(ocl::Buffer ob, ocl::Buffer::wrap(*rt, out_bytes, o, ocl::Access::write_only));
+    BTFC_RETURN_IF_ERROR(k.args(sb, int32_t(ys0), int32_t(w), int32_t(h), int32_t(d), ob, int32_t(y0), int32_t(rows)));
     const size_t global = size_t(rows) * size_t(w2);
-    BTFC_CL_CHECK(clEnqueueNDRangeKernel(queue, k, 1, nullptr, &global, nullptr, 0, nullptr, nullptr), "lpyr_reduce");
-    BTFC_RETURN_IF_ERROR(ob.sync_to_host(queue, out_bytes));
+    BTFC_RETURN_IF_ERROR(k.launch(1, &global, nullptr, "lpyr_reduce"));
+    BTFC_RETURN_IF_ERROR(ob.sync_to_host(out_bytes));
   }
   return {};
 }
@@ -66,29 +53,20 @@ Status subtract_up_tiles(float* f, int w, int h, size_t d, const float* next, in
   *done = 0;
   BTFC_RETURN_IF_ERROR(check_sizes(w, h, d));
   BTFC_ASSIGN_OR_RETURN(ocl::Runtime * rt, ocl::Runtime::get());
-  BTFC_ASSIGN_OR_RETURN(cl_command_queue queue, rt->queue());
-  BTFC_ASSIGN_OR_RETURN(cl_kernel k, rt->kernel("lpyr", "lpyr_subtract_up"));
+  BTFC_ASSIGN_OR_RETURN(ocl::Kernel k, rt->kernel("lpyr", "lpyr_subtract_up"));
   const int w2 = (w + 1) / 2;
   const size_t row = size_t(w) * d * 4, row2 = size_t(w2) * d * 4;
   const int R = std::max(2, int(k_tile_bytes / (row + row2)) / 2 * 2);  // even: tiles start on even rows
   for (int y0 = 0; y0 < h; y0 += R) {
     const int rows = std::min(R, h - y0), yn0 = y0 / 2, yn1 = (y0 + rows - 1) / 2;
     const size_t f_bytes = size_t(rows) * row;
-    BTFC_ASSIGN_OR_RETURN(ocl::Buffer fb, ocl::Buffer::wrap(*rt, f_bytes, f + size_t(y0) * size_t(w) * d, CL_MEM_READ_WRITE));
+    BTFC_ASSIGN_OR_RETURN(ocl::Buffer fb, ocl::Buffer::wrap(*rt, f_bytes, f + size_t(y0) * size_t(w) * d, ocl::Access::read_write));
     BTFC_ASSIGN_OR_RETURN(ocl::Buffer nb, ocl::Buffer::wrap(*rt, size_t(yn1 - yn0 + 1) * row2,
-                                                            const_cast<float*>(next + size_t(yn0) * size_t(w2) * d), CL_MEM_READ_ONLY));
-    const cl_mem fm = fb.get(), nm = nb.get();
-    int a = 0;
-    BTFC_RETURN_IF_ERROR(set_arg(k, a++, fm));
-    BTFC_RETURN_IF_ERROR(set_arg(k, a++, cl_int(w)));
-    BTFC_RETURN_IF_ERROR(set_arg(k, a++, cl_int(d)));
-    BTFC_RETURN_IF_ERROR(set_arg(k, a++, cl_int(y0)));
-    BTFC_RETURN_IF_ERROR(set_arg(k, a++, cl_int(rows)));
-    BTFC_RETURN_IF_ERROR(set_arg(k, a++, nm));
-    BTFC_RETURN_IF_ERROR(set_arg(k, a++, cl_int(yn0)));
+                                                            const_cast<float*>(next + size_t(yn0) * size_t(w2) * d), ocl::Access::read_only));
+    BTFC_RETURN_IF_ERROR(k.args(fb, int32_t(w), int32_t(d), int32_t(y0), int32_t(rows), nb, int32_t(yn0)));
     const size_t global = size_t((rows + 1) / 2) * size_t(w2);  // one work-item per parent texel
-    BTFC_CL_CHECK(clEnqueueNDRangeKernel(queue, k, 1, nullptr, &global, nullptr, 0, nullptr, nullptr), "lpyr_subtract_up");
-    BTFC_RETURN_IF_ERROR(fb.sync_to_host(queue, f_bytes));
+    BTFC_RETURN_IF_ERROR(k.launch(1, &global, nullptr, "lpyr_subtract_up"));
+    BTFC_RETURN_IF_ERROR(fb.sync_to_host(f_bytes));
     *done = y0 + rows;
   }
   return {};

@@ -35,12 +35,6 @@ float dot_f(const float* a, const float* b, int n) {
   return s;
 }
 
-Status set_args(cl_kernel k, std::initializer_list<std::pair<const void*, size_t>> args) {
-  cl_uint a = 0;
-  for (auto [p, n] : args) BTFC_CL_CHECK(clSetKernelArg(k, a++, n, p), "clSetKernelArg");
-  return {};
-}
-
 }  // namespace
 
 void ssim_search_reference(const SearchProblem& p, SearchResult& r) {
@@ -69,13 +63,12 @@ void ssim_search_reference(const SearchProblem& p, SearchResult& r) {
 
 Status ssim_search_cl(const SearchProblem& p, SearchResult& r) {
   BTFC_ASSIGN_OR_RETURN(ocl::Runtime * rt, ocl::Runtime::get());
-  BTFC_ASSIGN_OR_RETURN(cl_command_queue q, rt->queue());
-  BTFC_ASSIGN_OR_RETURN(cl_kernel k, rt->kernel("mlvq", "mlvq_ssim_search"));
+  BTFC_ASSIGN_OR_RETURN(ocl::Kernel k, rt->kernel("mlvq", "mlvq_ssim_search"));
   std::vector<float> xm(size_t(5 * p.B)), em(size_t(4 * p.K));
   for (size_t i = 0; i < xm.size(); ++i) xm[i] = float(p.xm[i]);
   for (size_t i = 0; i < em.size(); ++i) em[i] = float(p.em[i]);
   const float dummy = 0;
-  auto buf = [&](const float* h, size_t n) { return ocl::Buffer::create(*rt, std::max<size_t>(n, 1) * 4, n ? h : &dummy, CL_MEM_READ_ONLY); };
+  auto buf = [&](const float* h, size_t n) { return ocl::Buffer::create(*rt, std::max<size_t>(n, 1) * 4, n ? h : &dummy, ocl::Access::read_only); };
   BTFC_ASSIGN_OR_RETURN(ocl::Buffer bxl, buf(p.Xl, size_t(p.B) * p.dl));
   BTFC_ASSIGN_OR_RETURN(ocl::Buffer bxc, buf(p.Xc, size_t(p.B) * p.dc));
   BTFC_ASSIGN_OR_RETURN(ocl::Buffer bel, buf(p.El, size_t(p.K) * p.dl));
@@ -85,20 +78,15 @@ Status ssim_search_cl(const SearchProblem& p, SearchResult& r) {
   r.idx.assign(size_t(p.B), -1);
   r.sim.assign(size_t(p.B), -3.f);
   r.scale.assign(size_t(p.B), 1.f);
-  BTFC_ASSIGN_OR_RETURN(ocl::Buffer bi, ocl::Buffer::wrap(*rt, size_t(p.B) * 4, r.idx.data(), CL_MEM_WRITE_ONLY));
-  BTFC_ASSIGN_OR_RETURN(ocl::Buffer bs, ocl::Buffer::wrap(*rt, size_t(p.B) * 4, r.sim.data(), CL_MEM_WRITE_ONLY));
-  BTFC_ASSIGN_OR_RETURN(ocl::Buffer bc, ocl::Buffer::wrap(*rt, size_t(p.B) * 4, r.scale.data(), CL_MEM_WRITE_ONLY));
-  cl_mem m[9] = {bxl.get(), bxc.get(), bel.get(), bec.get(), bxm.get(), bem.get(), bi.get(), bs.get(), bc.get()};
-  const cl_int B = p.B, K = p.K, dl = p.dl, dc = p.dc;
-  const cl_float tl = p.tl, tc = p.tc;
-  BTFC_RETURN_IF_ERROR(set_args(k, {{&m[0], sizeof(cl_mem)}, {&m[1], sizeof(cl_mem)}, {&m[2], sizeof(cl_mem)}, {&m[3], sizeof(cl_mem)},
-                                    {&m[4], sizeof(cl_mem)}, {&m[5], sizeof(cl_mem)}, {&B, 4}, {&K, 4}, {&dl, 4}, {&dc, 4}, {&tl, 4}, {&tc, 4},
-                                    {&m[6], sizeof(cl_mem)}, {&m[7], sizeof(cl_mem)}, {&m[8], sizeof(cl_mem)}}));
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer bi, ocl::Buffer::wrap(*rt, size_t(p.B) * 4, r.idx.data(), ocl::Access::write_only));
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer bs, ocl::Buffer::wrap(*rt, size_t(p.B) * 4, r.sim.data(), ocl::Access::write_only));
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer bc, ocl::Buffer::wrap(*rt, size_t(p.B) * 4, r.scale.data(), ocl::Access::write_only));
+  BTFC_RETURN_IF_ERROR(k.args(bxl, bxc, bel, bec, bxm, bem, int32_t(p.B), int32_t(p.K), int32_t(p.dl), int32_t(p.dc), p.tl, p.tc, bi, bs, bc));
   const size_t global = size_t(p.B);
-  BTFC_CL_CHECK(clEnqueueNDRangeKernel(q, k, 1, nullptr, &global, nullptr, 0, nullptr, nullptr), "mlvq_ssim_search");
-  BTFC_RETURN_IF_ERROR(bi.sync_to_host(q, size_t(p.B) * 4));
-  BTFC_RETURN_IF_ERROR(bs.sync_to_host(q, size_t(p.B) * 4));
-  BTFC_RETURN_IF_ERROR(bc.sync_to_host(q, size_t(p.B) * 4));
+  BTFC_RETURN_IF_ERROR(k.launch(1, &global, nullptr, "mlvq_ssim_search"));
+  BTFC_RETURN_IF_ERROR(bi.sync_to_host(size_t(p.B) * 4));
+  BTFC_RETURN_IF_ERROR(bs.sync_to_host(size_t(p.B) * 4));
+  BTFC_RETURN_IF_ERROR(bc.sync_to_host(size_t(p.B) * 4));
   return {};
 }
 
@@ -110,17 +98,14 @@ void rgb_to_lrg_reference(std::span<const float> rgb, float* lrg) {
 
 Status rgb_to_lrg_cl(std::span<const float> rgb, float* lrg) {
   BTFC_ASSIGN_OR_RETURN(ocl::Runtime * rt, ocl::Runtime::get());
-  BTFC_ASSIGN_OR_RETURN(cl_command_queue q, rt->queue());
-  BTFC_ASSIGN_OR_RETURN(cl_kernel k, rt->kernel("mlvq", "mlvq_rgb_to_lrg"));
+  BTFC_ASSIGN_OR_RETURN(ocl::Kernel k, rt->kernel("mlvq", "mlvq_rgb_to_lrg"));
   const size_t n = rgb.size() / 3;
   if (n == 0) return {};
-  BTFC_ASSIGN_OR_RETURN(ocl::Buffer bi, ocl::Buffer::create(*rt, n * 12, rgb.data(), CL_MEM_READ_ONLY));
-  BTFC_ASSIGN_OR_RETURN(ocl::Buffer bo, ocl::Buffer::wrap(*rt, n * 12, lrg, CL_MEM_WRITE_ONLY));
-  cl_mem a = bi.get(), o = bo.get();
-  const cl_int nn = cl_int(n);
-  BTFC_RETURN_IF_ERROR(set_args(k, {{&a, sizeof(cl_mem)}, {&nn, 4}, {&o, sizeof(cl_mem)}}));
-  BTFC_CL_CHECK(clEnqueueNDRangeKernel(q, k, 1, nullptr, &n, nullptr, 0, nullptr, nullptr), "mlvq_rgb_to_lrg");
-  return bo.sync_to_host(q, n * 12);
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer bi, ocl::Buffer::create(*rt, n * 12, rgb.data(), ocl::Access::read_only));
+  BTFC_ASSIGN_OR_RETURN(ocl::Buffer bo, ocl::Buffer::wrap(*rt, n * 12, lrg, ocl::Access::write_only));
+  BTFC_RETURN_IF_ERROR(k.args(bi, int32_t(n), bo));
+  BTFC_RETURN_IF_ERROR(k.launch(1, &n, nullptr, "mlvq_rgb_to_lrg"));
+  return bo.sync_to_host(n * 12);
 }
 
 FlatModel flatten(const Hierarchy& h) {
@@ -211,29 +196,25 @@ Result<std::shared_ptr<DeviceModel>> DeviceModel::upload(const FlatModel& f) {
   BTFC_ASSIGN_OR_RETURN(ocl::Runtime * rt, ocl::Runtime::get());
   auto d = std::shared_ptr<DeviceModel>(new DeviceModel());
   d->m = std::make_unique<Impl>();
-  BTFC_ASSIGN_OR_RETURN(d->m->meta, ocl::Buffer::create(*rt, f.meta.size() * 4, f.meta.data(), CL_MEM_READ_ONLY));
-  BTFC_ASSIGN_OR_RETURN(d->m->idx, ocl::Buffer::create(*rt, f.idx.size() * 4, f.idx.data(), CL_MEM_READ_ONLY));
-  BTFC_ASSIGN_OR_RETURN(d->m->val, ocl::Buffer::create(*rt, f.val.size() * 4, f.val.data(), CL_MEM_READ_ONLY));
+  BTFC_ASSIGN_OR_RETURN(d->m->meta, ocl::Buffer::create(*rt, f.meta.size() * 4, f.meta.data(), ocl::Access::read_only));
+  BTFC_ASSIGN_OR_RETURN(d->m->idx, ocl::Buffer::create(*rt, f.idx.size() * 4, f.idx.data(), ocl::Access::read_only));
+  BTFC_ASSIGN_OR_RETURN(d->m->val, ocl::Buffer::create(*rt, f.val.size() * 4, f.val.data(), ocl::Access::read_only));
   return d;
 }
 
 Status DeviceModel::eval(std::span<const int> texel, std::span<const float> coord, float* out) const {
   BTFC_ASSIGN_OR_RETURN(ocl::Runtime * rt, ocl::Runtime::get());
-  BTFC_ASSIGN_OR_RETURN(cl_command_queue q, rt->queue());
-  BTFC_ASSIGN_OR_RETURN(cl_kernel k, rt->kernel("mlvq", "mlvq_eval"));
+  BTFC_ASSIGN_OR_RETURN(ocl::Kernel k, rt->kernel("mlvq", "mlvq_eval"));
   constexpr size_t slice = size_t(1) << 22;
   for (size_t first = 0; first < texel.size(); first += slice) {
     const size_t n = std::min(slice, texel.size() - first);
-    BTFC_ASSIGN_OR_RETURN(ocl::Buffer bt, ocl::Buffer::wrap(*rt, n * 4, const_cast<int*>(texel.data() + first), CL_MEM_READ_ONLY));
-    BTFC_ASSIGN_OR_RETURN(ocl::Buffer bc, ocl::Buffer::wrap(*rt, n * 16, const_cast<float*>(coord.data() + 4 * first), CL_MEM_READ_ONLY));
-    BTFC_ASSIGN_OR_RETURN(ocl::Buffer bo, ocl::Buffer::wrap(*rt, n * 12, out + 3 * first, CL_MEM_WRITE_ONLY));
-    cl_mem a0 = m->meta.get(), a1 = m->idx.get(), a2 = m->val.get(), a3 = bt.get(), a4 = bc.get(), a6 = bo.get();
-    const cl_int nn = cl_int(n);
-    BTFC_RETURN_IF_ERROR(set_args(k, {{&a0, sizeof(cl_mem)}, {&a1, sizeof(cl_mem)}, {&a2, sizeof(cl_mem)}, {&a3, sizeof(cl_mem)},
-                                      {&a4, sizeof(cl_mem)}, {&nn, 4}, {&a6, sizeof(cl_mem)}}));
+    BTFC_ASSIGN_OR_RETURN(ocl::Buffer bt, ocl::Buffer::wrap(*rt, n * 4, const_cast<int*>(texel.data() + first), ocl::Access::read_only));
+    BTFC_ASSIGN_OR_RETURN(ocl::Buffer bc, ocl::Buffer::wrap(*rt, n * 16, const_cast<float*>(coord.data() + 4 * first), ocl::Access::read_only));
+    BTFC_ASSIGN_OR_RETURN(ocl::Buffer bo, ocl::Buffer::wrap(*rt, n * 12, out + 3 * first, ocl::Access::write_only));
+    BTFC_RETURN_IF_ERROR(k.args(m->meta, m->idx, m->val, bt, bc, int32_t(n), bo));
     const size_t local = 64, global = (n + local - 1) / local * local;
-    BTFC_CL_CHECK(clEnqueueNDRangeKernel(q, k, 1, nullptr, &global, &local, 0, nullptr, nullptr), "mlvq_eval");
-    BTFC_RETURN_IF_ERROR(bo.sync_to_host(q, n * 12));
+    BTFC_RETURN_IF_ERROR(k.launch(1, &global, &local, "mlvq_eval"));
+    BTFC_RETURN_IF_ERROR(bo.sync_to_host(n * 12));
   }
   return {};
 }
