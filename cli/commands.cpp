@@ -170,6 +170,7 @@ int cmd_synth(const Global& g, const SynthArgs& a) {
   o.seed = a.seed;
   o.bump = a.bump;
   o.scale = a.scale;
+  o.noise = a.noise;
   auto lights = parse_direction_set(a.lights, "--lights");
   if (!lights.ok()) return fail(g, lights.status());
   auto views = parse_direction_set(a.views, "--views");
@@ -304,12 +305,16 @@ int cmd_compress(const Global& g, const CompressArgs& given) {
     if (!choice.ok()) return fail(g, choice.status().with_context(a.in));
     TargetChoice& c = choice.value();
     target_json = {{"knob", c.knob}, {"value", c.knob_value}, {"reached", num(c.measure)}, {"probes", json::array()}};
+    if (c.knob_limit > 0) target_json["knob_limit"] = c.knob_limit;
     for (const TargetProbe& p : c.probes)
       target_json["probes"].push_back({{"knob", p.knob}, {"measure", num(p.measure)}, {"meets", p.meets}});
     if (!g.json && !g.quiet) {
       std::cout << "target: chose " << c.knob << " = " << c.knob_value << " (reached " << c.measure << "); probes:";
       for (const TargetProbe& p : c.probes) std::cout << " " << p.knob << (p.meets ? "+" : "-") << "(" << p.measure << ")";
       std::cout << "\n";
+      if (!c.variants.empty()) std::cout << "target: best fit per setting:" << c.variants << "\n";
+      if (c.knob_limit > 0)
+        std::cout << "target: " << c.knob << " limited to " << c.knob_limit << " for this data's size (the codec's budget limit)\n";
     }
     model = std::move(c.model);
   } else {

@@ -33,7 +33,7 @@ struct SynthArgs {
   int width = 32, height = 32;
   std::string lights = "ubo2003", views = "ubo2003";  // ubo2003 | ubo2014 | "THETA,PHI" (one direction, degrees)
   unsigned long long seed = 1;
-  float bump = 1.0f, scale = 1.0f;
+  float bump = 1.0f, scale = 1.0f, noise = 0.0f;
   std::string format = "exr";  // image-set output: exr | png
 };
 

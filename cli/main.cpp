@@ -66,6 +66,8 @@ int main(int argc, char** argv) {
   synth->add_option("--seed", sy.seed, "random seed");
   synth->add_option("--bump", sy.bump, "height-field amplitude (0 = flat)")->check(CLI::Range(0.0, 100.0));
   synth->add_option("--scale", sy.scale, "multiplies all values (HDR)")->check(CLI::Range(1e-30, 1e30));
+  synth->add_option("--noise", sy.noise, "measurement noise: each value times max(0, 1 + noise x standard normal), independent per image")
+      ->check(CLI::Range(0.0, 10.0));
   synth->add_option("--format", sy.format, "image-set format")->check(CLI::IsMember({"exr", "png"}));
   synth->callback([&] { code = cmd_synth(g, sy); });
 

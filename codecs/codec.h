@@ -120,8 +120,17 @@ class Codec {
   // Settings a byte-budget search (codecs/target.h) tries besides the knob: each a spec fragment
   // ("precision=q:bits=6") laid over the spec; keys the user's spec sets are never overridden.
   // For each the knob is searched and the most accurate (PSNR) model that fits wins. Empty: the
-  // knob alone.
+  // knob alone. Listed from the most to the least accurate at equal knob (half, then q at falling
+  // bit depths): once one fits at budget_knob_limit, the later ones cannot beat it and are skipped.
   virtual std::vector<std::string> budget_variants() const { return {}; }
+  // Why --max-bytes cannot search this codec (nullptr: it can): choose_for_target refuses a byte
+  // budget with this reason, naming what to use instead, rather than run a search for an hour.
+  virtual const char* no_budget_search() const { return nullptr; }
+  // The largest quality knob a byte-budget search probes on data of this shape (0: the knob's
+  // range); the spec's own knob value is always allowed. Each probe is a whole encode whose cost
+  // grows with the knob, and quantized payloads grow slower than linearly with it, so without a
+  // limit a search for a large budget walks up to the range's end (lpyr's y to 4096: an hour).
+  virtual long long budget_knob_limit(const BtfDesc&) const { return 0; }
   // Out of core (codecs/streaming.h): the encoder that works from column chunks of a BTF it
   // never holds whole, or null when the codec needs the BTF in memory.
   virtual const StreamingEncoder* streaming() const { return nullptr; }
@@ -137,6 +146,11 @@ struct CodecEntry {
   const gpu::Exporter* exporter;
 };
 std::span<const CodecEntry> codec_registry();
+
+// budget_knob_limit of the codecs whose knob counts basis vectors (fmf rank, lpyr y, lpca
+// components): one per 64 texels, the rule lpca's default cluster count follows (a basis vector
+// estimated from fewer texels fits their noise). 64 on the 64 x 64 textile, 1024 at 256 x 256.
+inline long long components_backed_by_texels(const BtfDesc& d) { return (long long)(d.num_texels() / 64); }
 std::span<const Codec* const> all_codecs();  // the registry's codecs, in its order
 // Appends a codec defined outside the library (tests/toy_codec: the test-only codec) to the
 // table: one explicit call, no static self-registration inside the library. Call it before the

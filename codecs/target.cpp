@@ -93,8 +93,13 @@ Result<TargetChoice> search_knob(const Btf& btf, const std::string& spec, const 
   if (!knob) return unsupported(std::string("codec '") + codec.name() + "' declares no quality knob to search");
   BTFC_ASSIGN_OR_RETURN(SpecString base, parse_spec_string(spec));
   Search s{btf, codec, std::move(base), *knob, target, ctx, {}, {}, {}};
-  const long long lo_end = s.lo_index(), hi_end = s.hi_index();
+  const long long lo_end = s.lo_index();
+  long long hi_end = s.hi_index();
   long long start = std::clamp(s.index_of(resolved.second.get_real(knob->name)), lo_end, hi_end);
+  // A byte budget probes no knob above the codec's limit for this data (or the spec's own value).
+  const long long limit = target.kind == Target::Kind::max_bytes && knob->type == ParamSpec::Type::integer
+                              ? codec.budget_knob_limit(btf.desc()) : 0;
+  if (limit > 0) hi_end = std::clamp(limit, start, hi_end);
 
   // g(i) = "meets" for accuracy targets and "exceeds" for a byte budget: false then true as the
   // knob grows. Invariant: !g(lo), g(hi); lo = lo_end - 1 and hi = hi_end + 1 stand in for ends
@@ -139,10 +144,31 @@ Result<TargetChoice> search_knob(const Btf& btf, const std::string& spec, const 
       last = p.measure;
     }
   }
+  // Narrow the bracket. For a byte budget the bytes grow about linearly with the knob, so the
+  // next probe is interpolated between the bracket's measures; when that one fits, its neighbour
+  // (knob + 1) is tried next, which on linear bytes ends the search: two or three probes instead
+  // of log2 of the range (each probe is a whole encode). An interpolated probe that did not halve
+  // the bracket makes the next one a bisection, so the search never takes more than about twice
+  // bisection's probes. Accuracy targets bisect.
+  enum class Step { interpolate, neighbour, bisect } step = quality ? Step::bisect : Step::interpolate;
   while (hi - lo > 1 && hi <= hi_end) {
-    const long long mid = lo + (hi - lo) / 2;
+    long long mid = lo + (hi - lo) / 2;
+    const auto lo_p = s.cache.find(lo), hi_p = s.cache.find(hi);
+    if (step == Step::neighbour) {
+      mid = lo + 1;
+    } else if (step == Step::interpolate && lo_p != s.cache.end() && hi_p != s.cache.end() &&
+               hi_p->second.measure > lo_p->second.measure) {
+      const double f = (target.value - lo_p->second.measure) / (hi_p->second.measure - lo_p->second.measure);
+      mid = std::clamp(lo + (long long)std::floor(f * double(hi - lo)), lo + 1, hi - 1);
+    } else if (step == Step::interpolate) {
+      step = Step::bisect;
+    }
+    const long long width = hi - lo;
     BTFC_ASSIGN_OR_RETURN(p, s.probe(mid));
     (g(p) ? hi : lo) = mid;
+    if (quality) continue;
+    if (step == Step::interpolate) step = lo == mid ? Step::neighbour : 2 * (hi - lo) > width ? Step::bisect : Step::interpolate;
+    else step = Step::interpolate;
   }
   const long long chosen = quality ? hi : lo;
   if (chosen < lo_end || chosen > hi_end || !s.models.count(chosen)) {
@@ -160,6 +186,7 @@ Result<TargetChoice> search_knob(const Btf& btf, const std::string& spec, const 
   c.model = std::move(s.models.at(chosen));
   c.spec = c.model->spec();
   c.probes = std::move(s.probes);
+  if (limit > 0) c.knob_limit = s.value(hi_end);
   return c;
 }
 
@@ -184,6 +211,8 @@ Result<TargetChoice> choose_for_target(const Btf& btf, const std::string& spec, 
       (target.kind == Target::Kind::max_bytes && target.value < 1))
     return invalid_argument("target " + std::string(kind_name(target.kind)) + " " + std::to_string(target.value) + " is out of range");
   BTFC_ASSIGN_OR_RETURN(auto resolved, resolve_spec(spec));
+  if (const char* why = resolved.first->no_budget_search(); why && target.kind == Target::Kind::max_bytes)
+    return unsupported(std::string(resolved.first->name()) + ": --max-bytes is not supported: " + why);
   const std::vector<std::string> variants = resolved.first->budget_variants();
   if (target.kind != Target::Kind::max_bytes || variants.empty()) return search_knob(btf, spec, target, ctx);
   // A byte budget over the codec's settings: the knob per setting, then the best PSNR.
@@ -212,7 +241,13 @@ Result<TargetChoice> choose_for_target(const Btf& btf, const std::string& spec, 
     std::snprintf(buf, sizeof buf, " %.3f dB;", m.psnr);
     tried += " " + c->spec + ":" + buf;
     c->psnr = m.psnr;
+    // At the knob's limit, the later settings (fewer bits at no larger knob) cannot be more accurate.
+    const bool at_limit = c->knob_limit > 0 && c->knob_value >= c->knob_limit;
     if (!best || m.psnr > best->psnr) best = std::move(c).value();
+    if (at_limit && &s != &specs.back()) {
+      tried += " (the rest skipped: this one fits at the knob's limit)";
+      break;
+    }
   }
   if (!best) return last;
   best->probes = std::move(probes);

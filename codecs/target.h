@@ -5,7 +5,10 @@
 // accurate and more bytes; fmf rank, lpyr y, lpca components, ...). The search encodes, decodes
 // and measures at probe settings: first the default (or the value the spec gives), then doubling
 // or halving until the target is bracketed, then bisection, over the knob's integer range (a real
-// knob is searched on a grid of 64 steps over its range). Contract, for a knob along which the
+// knob is searched on a grid of 64 steps over its range). A byte budget interpolates instead of
+// bisecting (bytes grow about linearly with the knob), probes no knob above the codec's
+// budget_knob_limit for the data (or the spec's own value), and is refused for codecs that say
+// why they cannot be searched (Codec::no_budget_search). Contract, for a knob along which the
 // measure is monotone: the chosen setting meets the target and the next cheaper one (knob - 1
 // step) does not, or it is the knob's cheapest setting. A target that even the most accurate
 // setting misses (or a budget the cheapest one exceeds) is an error that reports the best reached.
@@ -43,6 +46,9 @@ struct TargetChoice {
   // best fit with its PSNR ("spec: 41.2 dB; ...").
   double psnr = 0;
   std::string variants;
+  // A byte budget: the largest knob the search could probe (Codec::budget_knob_limit, or the
+  // spec's own value when larger); 0 when the knob's whole range was open.
+  double knob_limit = 0;
 };
 
 // The codec's quality knob, or nullptr when it declares none.

@@ -175,6 +175,8 @@ Result<Btf> synthesize_btf(const SynthOptions& opt) {
     return invalid_argument("synth: bump must be finite and >= 0, got " + std::to_string(opt.bump));
   if (!std::isfinite(opt.scale) || opt.scale < 0)
     return invalid_argument("synth: scale must be finite and >= 0, got " + std::to_string(opt.scale));
+  if (!std::isfinite(opt.noise) || opt.noise < 0 || opt.noise > 10)
+    return invalid_argument("synth: noise must be within [0, 10], got " + std::to_string(opt.noise));
   BtfDesc desc;
   desc.width = opt.width, desc.height = opt.height, desc.channels = 3;
   desc.lights = opt.lights, desc.views = opt.views;
@@ -226,6 +228,14 @@ Result<Btf> synthesize_btf(const SynthOptions& opt) {
           const float spec = ndh > 0 ? spec_norm * std::pow(ndh, alpha) : 0.0f;
           const float k = cos_l * sl[l] * sv[v];
           for (int c = 0; c < 3; ++c) out[c] = k * (kd[c] * inv_pi + spec) * opt.scale;
+          if (opt.noise > 0)  // Box-Muller from two hashes of (texel, image, channel): order-free
+            for (int c = 0; c < 3; ++c) {
+              const uint64_t key = (uint64_t(l + nl * v) * 3 + uint64_t(c)) * 2;
+              const uint64_t ns = opt.seed ^ 0x6E6F697365ull;  // not the albedo's hashes
+              const double u1 = hash01(ns, uint64_t(t), key, 3), u2 = hash01(ns, uint64_t(t), key + 1, 3);
+              const double g = std::sqrt(-2 * std::log(1 - u1)) * std::cos(2 * k_pi * u2);
+              out[c] *= float(std::max(0.0, 1 + double(opt.noise) * g));
+            }
         }
       }
     }

@@ -7,6 +7,9 @@
 // exponent alpha, and S_l / S_v the self-shadowing and masking found by marching a ray over the
 // height field towards the light / the viewer. The cosine is the *macro* cos(theta_l), as in
 // measured BTFs (the data already contains it). Values are linear, roughly within [0, 1].
+// `noise` > 0 adds measurement noise: every value (texel, light, view, channel) independently
+// multiplied by max(0, 1 + noise g), g standard normal, as photon / Monte Carlo noise that no two
+// images share (the albedo grain, by contrast, repeats in every image: it is texture).
 // Same parameters -> bit-identical output.
 #pragma once
 #include <cstdint>
@@ -22,6 +25,7 @@ struct SynthOptions {
   uint64_t seed = 1;
   float bump = 1.0f;    // height-field amplitude (0 = flat)
   float scale = 1.0f;   // multiplies all values (HDR tests use e.g. 1e6)
+  float noise = 0.0f;   // relative standard deviation of per-value multiplicative noise (0 = none)
 };
 
 Result<Btf> synthesize_btf(const SynthOptions& opt);

@@ -4,6 +4,7 @@
 
 #include <cmath>
 
+#include "codecs/fmf/fmf.h"
 #include "codecs/lpca/lpca.h"
 #include "codecs/measure.h"
 #include "codecs/target.h"
@@ -142,6 +143,35 @@ TEST(Target, ByteBudgetChoosesTheLargestThatFits) {
   ASSERT_TRUE(c.ok()) << c.status().message();
   EXPECT_EQ(int(c->knob_value), 6);
   EXPECT_LE(c->model->payload_bytes(), b6);
+  // Half-float bytes are linear in the rank: from the default (32) the estimate lands on 6 and its
+  // neighbour 7 closes the bracket; bisection over 1..32 would take 5 or more encodes.
+  EXPECT_LE(c->probes.size(), 3u);
+}
+
+TEST(Target, ByteBudgetProbesNoKnobAboveTheCodecsLimit) {
+  const Btf b = small_btf(24, 24);  // 576 texels: fmf's budget limit is 576 / 64 = 9 components
+  ASSERT_EQ(fmf_codec().budget_knob_limit(b.desc()), 9);
+  Context ctx;
+  const Target all{Target::Kind::max_bytes, 1e12};  // a budget no rank fills
+  auto c = choose_for_target(b, "fmf:precision=half:rank=2", all, ctx);
+  ASSERT_TRUE(c.ok()) << c.status().message();
+  EXPECT_EQ(int(c->knob_value), 9);
+  EXPECT_EQ(c->knob_limit, 9);
+  for (const TargetProbe& p : c->probes) EXPECT_LE(p.knob, 9);
+  // The spec's own value is always allowed.
+  auto own = choose_for_target(b, "fmf:precision=half:rank=12", all, ctx);
+  ASSERT_TRUE(own.ok()) << own.status().message();
+  EXPECT_EQ(int(own->knob_value), 12);
+}
+
+TEST(Target, CodecsThatCannotBeSearchedSaySoForAByteBudget) {
+  const Btf b = small_btf(8, 8);
+  Context ctx;
+  auto c = choose_for_target(b, "mlvq", Target{Target::Kind::max_bytes, 1e6}, ctx);
+  ASSERT_FALSE(c.ok());
+  EXPECT_EQ(c.status().code(), StatusCode::unsupported);
+  EXPECT_NE(c.status().message().find("--max-bytes is not supported"), std::string::npos) << c.status().message();
+  EXPECT_NE(c.status().message().find("min_ratio"), std::string::npos) << c.status().message();
 }
 
 TEST(Target, UnreachableTargetsAreErrors) {

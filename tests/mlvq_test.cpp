@@ -504,8 +504,9 @@ TEST(MlvqOpenCL, BatchedDecodeKernelMatchesReferenceAndModel) {
 
 // ---- the measured layout (payload version 2) -----------------------------------------------------
 
-// Measured: rel_l2 0.374 (MSSIM 0.769, 372 : 1) for the default on synth(6, 6, 1, 7).
-constexpr double SYN_REL = 0.40;
+// Measured: rel_l2 0.2964 for the default on synth(6, 6, 1, 7) (0.374 before the noise estimate
+// took the texture that repeats in the partner image for texture: noise.cpp).
+constexpr double SYN_REL = 0.32;
 
 TEST(MlvqMeasured, LayoutCoversTheMeasuredPairsOnce) {
   BtfDesc d;

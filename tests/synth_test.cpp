@@ -159,6 +159,33 @@ TEST(Synth, ScaleMultiplies) {
   }
 }
 
+// Measurement noise: each value times max(0, 1 + noise g), independent per value: the relative
+// deviation from the clean values has standard deviation ~noise and mean ~0, and does not repeat
+// between two images of one texel (that is what tells it from albedo texture).
+TEST(Synth, NoiseIsMultiplicativeIndependentAndOfTheGivenSize) {
+  SynthOptions o = small(8, 8);
+  auto clean = synthesize_btf(o);
+  o.noise = 0.1f;
+  auto noisy = synthesize_btf(o), again = synthesize_btf(o);
+  ASSERT_TRUE(clean.ok() && noisy.ok() && again.ok());
+  double s = 0, s2 = 0, cross = 0;
+  size_t n = 0;
+  for (size_t i = 0; i + 3 < clean->size(); ++i) {
+    ASSERT_EQ(noisy->data()[i], again->data()[i]) << "deterministic";
+    ASSERT_GE(noisy->data()[i], 0.0f);
+    if (clean->data()[i] <= 0 || clean->data()[i + 3] <= 0) continue;
+    const double r = noisy->data()[i] / clean->data()[i] - 1, r3 = noisy->data()[i + 3] / clean->data()[i + 3] - 1;
+    s += r, s2 += r * r, cross += r * r3, ++n;  // i + 3: the same channel of the next light
+  }
+  ASSERT_GT(n, 10000u);
+  const double mean = s / double(n), sd = std::sqrt(s2 / double(n) - mean * mean);
+  EXPECT_NEAR(sd, 0.1, 0.005);
+  EXPECT_NEAR(mean, 0.0, 0.005);
+  EXPECT_NEAR(cross / double(n) / (sd * sd), 0.0, 0.05);  // correlation between images
+  o.noise = -1;
+  EXPECT_EQ(synthesize_btf(o).status().code(), StatusCode::invalid_argument);
+}
+
 TEST(Synth, RejectsBadOptions) {
   SynthOptions o = small();
   o.bump = -1;

@@ -101,8 +101,9 @@ class FmfCodec final : public Codec {
   // the rank searched for each: at a byte budget the best rank / precision pair depends on how
   // fast the data's singular values decay and how noisy it is.
   std::vector<std::string> budget_variants() const override {
-    return {"precision=half", "precision=q:bits=4", "precision=q:bits=5", "precision=q:bits=6", "precision=q:bits=8"};
+    return {"precision=half", "precision=q:bits=8", "precision=q:bits=6", "precision=q:bits=5", "precision=q:bits=4"};
   }
+  long long budget_knob_limit(const BtfDesc& d) const override { return components_backed_by_texels(d); }
   const StreamingEncoder* streaming() const override { return &fmf_streaming(); }
 
   Result<std::unique_ptr<Model>> encode(const Btf& btf, const Params& p, Context& ctx) const override {

@@ -245,8 +245,9 @@ class LpcaCodec final : public Codec {
   // --max-bytes searches the components (and with them the default cluster count) for half
   // floats and for quantized tables / weights at three bit depths (as fmf does).
   std::vector<std::string> budget_variants() const override {
-    return {"precision=half", "precision=q:bits=4", "precision=q:bits=6", "precision=q:bits=8"};
+    return {"precision=half", "precision=q:bits=8", "precision=q:bits=6", "precision=q:bits=4"};
   }
+  long long budget_knob_limit(const BtfDesc& d) const override { return components_backed_by_texels(d); }
 
   Result<std::unique_ptr<Model>> encode(const Btf& btf, const Params& p, Context& ctx) const override {
     const BtfDesc& d = btf.desc();

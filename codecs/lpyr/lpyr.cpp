@@ -244,8 +244,9 @@ class LpyrCodec final : public Codec {
   std::span<const ParamSpec> params() const override { return k_params; }
   // --max-bytes searches y for half floats and for quantized payloads at three bit depths.
   std::vector<std::string> budget_variants() const override {
-    return {"precision=half", "precision=q:bits=4", "precision=q:bits=6", "precision=q:bits=8"};
+    return {"precision=half", "precision=q:bits=8", "precision=q:bits=6", "precision=q:bits=4"};
   }
+  long long budget_knob_limit(const BtfDesc& d) const override { return components_backed_by_texels(d); }
 
   Result<std::unique_ptr<Model>> encode(const Btf& btf, const Params& p, Context& ctx) const override {
     const BtfDesc& d = btf.desc();

@@ -49,6 +49,11 @@ class MlvqCodec final : public Codec {
   const char* summary() const override { return "multi-level SSIM vector quantization, Huffman-coded indices, seed 003 sections 3-4"; }
   uint32_t payload_version() const override { return k_payload_version; }
   std::span<const ParamSpec> params() const override { return k_params; }
+  const char* no_budget_search() const override {
+    return "every probe of a search is a whole vector-quantization encode (about a minute for 64 x 64 texels x 81 x 81 "
+           "directions), so a search would take many minutes; use mlvq:min_ratio=R instead (the thresholds are relaxed, "
+           "up to 4 times, while the payload exceeds float32 raw / R) or set the ssim1..ssim4 thresholds";
+  }
 
   Result<std::unique_ptr<Model>> encode(const Btf& btf, const Params& p, Context& ctx) const override {
     const BtfDesc& d = btf.desc();

@@ -48,7 +48,7 @@
 // noise=auto caps each level at its "noise ceiling" (noise.cpp: the median SSIM two noisy
 // copies of one slice reach, from a MAD noise estimate of the data; never more than 0.2 below
 // the given threshold, which bounds what a misestimate can do). On the textile only level 1
-// binds (ceiling 0.87); on clean data none does. Chromaticity thresholds are 1 - 3 (1 - t):
+// binds (ceiling 0.89); on clean data none does. Chromaticity thresholds are 1 - 3 (1 - t):
 // chromaticity is scale-free and multiplied by luminance, and in dark values it is mostly noise
 // (r, g of near-zero RGB), which at chroma=1 filled a third of the payload. min_ratio=30: when the
 // payload still exceeds raw / 30 (very noisy data), all thresholds are relaxed (1 - t) x 1.6
@@ -59,8 +59,10 @@
 // (auto|measured|grid), phi/theta/alpha/beta (grid), value_bits, huffman (auto|off),
 // scale_bits (auto|8|10|12|16), noise (auto|off), min_ratio.
 //
-// Estimator caveat of noise=auto: the image-domain estimator counts spatial contrast at the
-// texel scale as noise: on a BTF whose texel magnitudes jump by 100x between neighbours
+// Estimator caveat of noise=auto: contrast at the texel scale that repeats in the partner image
+// (same light, nearest other view) is taken for texture (noise.cpp), so a speckled albedo no
+// longer reads as noise; contrast that does not repeat still does: on a BTF whose texel
+// magnitudes jump by 100x between neighbours
 // (tests/mlvq_test.cpp HdrFromOneMillionth...) it drives the ceilings towards 0; the 0.2 floor
 // keeps the thresholds usable there. `scheme=best` encodes with all four schemes and keeps the
 // smallest among those whose estimated quality (mean per-texel SSIM of the luminance) is

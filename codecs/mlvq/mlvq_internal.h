@@ -155,8 +155,9 @@ double ssim_from_moments(double n, double sx, double sxx, double se, double see,
 // ---- noise-adaptive thresholds (noise.cpp) -----------------------------------------------------
 // Per (light, view) image (index l + nl v): the noise variance of luminance L and of the
 // chromaticity (mean of r and g), by Donoho's MAD estimator on the finest diagonal Haar
-// details of 2 x 2 texel blocks (at most max_blocks blocks on a regular sub-grid). Zero when the
-// BTF is narrower or lower than 2 texels.
+// details of 2 x 2 texel blocks (at most max_blocks blocks on a regular sub-grid), lowered where
+// the same detail repeats in the partner image (same light, nearest other view; noise.cpp: that
+// is texture, not noise). Zero when the BTF is narrower or lower than 2 texels.
 struct NoiseEstimate {
   std::vector<float> lum_var, chroma_var;
 };

@@ -113,9 +113,10 @@ TEST(MlvqTextile, NoiseCeilingsOfTheTextileAreMeasuredAndBindOnlyWhenBelowTheThr
     EXPECT_LT(c.lum[k], 1.0);
     EXPECT_LT(c.chroma[k], 1.0);
   }
-  // Measured: 0.163 on this crop and grid (0.8 - 0.97 at levels 2 - 4, chroma ~0.99).
+  // Measured: 0.0854 on this crop and grid (0.97 - 0.98 at levels 2 - 4, chroma ~0.99; 0.163
+  // before the estimate took detail repeated in the partner image for texture, noise.cpp).
   // 1 - ceiling is the noise's SSIM loss: two-sided on level 1 (the shortest vectors, lowest ceiling).
-  in_band(1 - c.lum[1], 0.18, "1 - luminance noise ceiling at level 1");
+  in_band(1 - c.lum[1], 0.09, "1 - luminance noise ceiling at level 1");
   // noise=auto caps the thresholds at the ceilings.
   auto m = encode(b, "mlvq:scheme=4:phi=8:theta=4:alpha=7:beta=7:noise=auto:ssim1=0.999:ssim4=0.9");
   ASSERT_TRUE(m.ok()) << m.status().message();
@@ -126,9 +127,10 @@ TEST(MlvqTextile, NoiseCeilingsOfTheTextileAreMeasuredAndBindOnlyWhenBelowTheThr
 // The default (measured layout, noise-capped thresholds) on a 16 x 16 crop: no resampling error,
 // the level-1 threshold set by the noise, and error / ratio / MSSIM (btfc's metric with each
 // image's maximum as data range, as scripts/mssim.py) in measured bands.
-// Measured (crop x, y = 16..31): level-1 threshold 0.8758 (the noise ceiling), rel_l2 0.387,
-// MSSIM 0.525, 124.7 : 1 (the full textile: docs/benchmarks.md).
-constexpr double BOUND_NOISE = 0.14, BOUND_REL = 0.42, BOUND_SSIM = 0.52, BOUND_RATIO = 140;
+// Measured (crop x, y = 16..31): level-1 threshold 0.8995 (the noise ceiling), rel_l2 0.380,
+// MSSIM 0.540, 112.1 : 1 (before the partner-image noise estimate: 0.8758, 0.387, 0.525, 124.7 : 1;
+// the full textile: docs/benchmarks.md).
+constexpr double BOUND_NOISE = 0.11, BOUND_REL = 0.42, BOUND_SSIM = 0.52, BOUND_RATIO = 140;
 
 TEST(MlvqTextile, DefaultOnACropHasMeasuredQualityRatioAndNoiseThreshold) {
   ASSERT_TRUE(have_data()) << "../shared/data/textile_lurex_utia64 is missing";
