@@ -101,7 +101,7 @@ class MlvqCodec final : public Codec {
     o.cl_search = ocl::use_opencl(&why);
     if (o.cl_search) {
       auto rt = ocl::Runtime::get();
-      o.cl_search = rt.ok() && rt.value()->info().type.find("GPU") != std::string::npos;
+      o.cl_search = rt.ok() && rt.value()->info().type == "gpu";
     }
     o.value_bits = int(p.get_int("value_bits"));
     const bool huffman = p.get("huffman") == "auto";
