@@ -16,6 +16,7 @@
 #include "codecs/measure.h"
 #include "core/sysinfo.h"
 #include "formats/btf_io.h"
+#include "formats/reader.h"
 #include "formats/preview.h"
 
 namespace btfc::cli {
@@ -60,7 +61,10 @@ int cmd_bench(const Global& g, const BenchArgs& a) {
     if (Status c = claim_output(a.csv, {a.in}, {"--csv", {".csv", ".txt"}, false, true}); !c.ok()) return fail(g, c);
   if (!a.json_out.empty())
     if (Status c = claim_output(a.json_out, {a.in}, {"--json-out", {".json"}, false, true}); !c.ok()) return fail(g, c);
-  if (int code = 0; bench_streamed(g, a, code)) return code;  // larger than --max-memory: streamed fmf
+  // Probed and opened once (formats/reader.h): streamed when larger than --max-memory, else read.
+  auto input = open_input(a.in);
+  if (!input.ok()) return fail(g, input.status());
+  if (int code = 0; bench_streamed(g, a, *input.value(), code)) return code;  // streamed fmf
   std::vector<std::string> specs;
   for (const std::string& s : a.specs) {
     auto expanded = expand_sweep(s);
@@ -75,7 +79,7 @@ int cmd_bench(const Global& g, const BenchArgs& a) {
   const bool streaming = a.csv == "-" || a.json_out == "-";
   if (streaming && g.json) return fail(g, invalid_argument("--json and --csv - / --json-out -: only one report can go to stdout"));
   FILE* tbl = streaming ? stderr : stdout;
-  auto btf = read_btf(a.in);
+  auto btf = input.value()->read();
   if (!btf.ok()) return fail(g, btf.status());
   const std::string label = a.label.empty() ? std::filesystem::path(a.in).filename().string() : a.label;
   const std::string machine = machine_summary();
@@ -207,11 +211,12 @@ int cmd_render(const Global& g, const RenderArgs& a) {
   // A model renders through its own evaluation; anything else (image set, raw container, Bonn
   // file) as data interpolated between measured directions.
   Result<RgbImage> img = invalid_argument("render: nothing rendered");
-  auto model = open_model(a.in);
-  if (model.ok()) {
-    img = render(model.value()->desc(), model_evaluator(*model.value()), s);
+  auto input = open_input(a.in);  // probed and opened once
+  if (!input.ok()) return fail(g, input.status());
+  if (const Model* model = input.value()->model()) {
+    img = render(model->desc(), model_evaluator(*model), s);
   } else {
-    auto btf = read_btf(a.in);
+    auto btf = input.value()->read();
     if (!btf.ok()) return fail(g, btf.status());
     img = render(btf->desc(), btf_evaluator(btf.value()), s);
   }

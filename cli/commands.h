@@ -132,7 +132,7 @@ void note_clamped(const Global& g, const std::string& input, const ModelStats& s
 // (the BTF does not fit in --max-memory, or the output is a streamed Bonn BDI), with `code` set.
 bool compress_streamed(const Global& g, const CompressArgs& a, BtfInput& input, int& code);
 bool decompress_streamed(const Global& g, const DecompressArgs& a, int& code);
-bool bench_streamed(const Global& g, const BenchArgs& a, int& code);
+bool bench_streamed(const Global& g, const BenchArgs& a, BtfInput& input, int& code);
 
 // `bsvtf` and `tilecache` (cli/bsvtf_commands.cpp): registers both on `app`; they set `code`.
 void add_bsvtf_commands(CLI::App& app, const Global& g, int& code);

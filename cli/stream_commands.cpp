@@ -173,11 +173,11 @@ bool decompress_streamed(const Global& g, const DecompressArgs& a, int& code) {
   return true;
 }
 
-bool bench_streamed(const Global& g, const BenchArgs& a, int& code) {
+bool bench_streamed(const Global& g, const BenchArgs& a, BtfInput& input, int& code) {
   auto limit = limit_of(a.max_memory);
   if (!limit.ok()) return code = fail(g, limit.status()), true;
-  auto desc = probe_btf(a.in);
-  if (!desc.ok() || desc->num_values() * 4 <= *limit) return false;
+  const BtfDesc* desc = &input.desc();
+  if (desc->num_values() * 4 <= *limit) return false;
   const std::string label = a.label.empty() ? a.in : a.label;
   json rows = json::array();
   if (!g.json && a.header)
@@ -189,7 +189,7 @@ bool bench_streamed(const Global& g, const BenchArgs& a, int& code) {
     json report;
     OutOfCoreResult ooc;
     const auto t0 = Clock::now();
-    auto model = encode_streamed(g, a.in, spec, "", temp_dir, *limit, a.seed, report, ooc);
+    auto model = encode_streamed(g, a.in, spec, "", temp_dir, *limit, a.seed, report, ooc, &input);
     if (!model.ok()) return code = fail(g, model.status().with_context(a.in)), true;
     const double enc_s = since(t0);
     // The reference is what the factorization read: the raw .btfc in place, or the working file.
@@ -199,7 +199,7 @@ bool bench_streamed(const Global& g, const BenchArgs& a, int& code) {
     if (ref == a.in && is_raw_btfc_file(a.in)) {
       auto src = open_raw_chunks(a.in, uint32_t(report["chunk_texels"].get<uint64_t>() / uint64_t(desc->width)));
       if (!src.ok()) return code = fail(g, src.status()), true;
-      m = compare_streamed(*src.value(), desc.value(), a.in, *model.value());  // decodes chunk by chunk while comparing
+      m = compare_streamed(*src.value(), *desc, a.in, *model.value());  // decodes chunk by chunk while comparing
     } else {
       auto file = BdiChunks::open(ref);
       if (!file.ok()) return code = fail(g, file.status()), true;
