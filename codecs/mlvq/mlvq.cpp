@@ -158,13 +158,10 @@ class MlvqCodec final : public Codec {
       if (h.chroma[k].K) st.add("entries.chroma" + std::to_string(k), h.chroma[k].K);
     }
     st.add("entries.merge", h.merge_size());
-    const double raw = double(d.num_values()) * 4;
     const uint64_t plain = c.model->plain_payload_bytes();
     st.add("payload_bytes_plain", double(plain));
     st.add("payload_bytes", double(c.bytes));
     for (const auto& [name, bytes] : c.model->tensor_bytes()) st.add("bytes." + name, double(bytes));
-    st.add("ratio_plain_vs_f32", raw / double(plain));
-    st.add("ratio_vs_f32", raw / double(c.bytes));
     st.add("huffman_gain", double(plain) / double(c.bytes));
     for (int k = 4; k >= 1; --k) {
       st.add("noise_ceiling.lum" + std::to_string(k), nc.lum[k]);
