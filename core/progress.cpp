@@ -2,11 +2,13 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 
 namespace btfc {
 
 Progress::Progress(bool quiet) : m_enabled(!quiet && isatty(STDERR_FILENO)) {}
+Progress::Progress(Callback callback) : m_enabled(bool(callback)), m_callback(std::move(callback)) {}
 Progress::~Progress() { finish(); }
 
 void Progress::start(const std::string& label, uint64_t total) {
@@ -29,6 +31,10 @@ void Progress::draw(bool force) {
   auto now = std::chrono::steady_clock::now();
   if (!force && now - m_last < std::chrono::milliseconds(100)) return;
   m_last = now;
+  if (m_callback) {
+    m_callback(m_label, std::min(m_done.load(), m_total), m_total);
+    return;
+  }
   double frac = double(m_done.load()) / double(m_total);
   if (frac > 1) frac = 1;
   const int width = 30;
@@ -47,7 +53,7 @@ void Progress::finish() {
   if (!m_active) return;
   if (m_enabled) {
     draw(true);
-    std::fputc('\n', stderr);
+    if (!m_callback) std::fputc('\n', stderr);
   }
   m_active = false;
 }

@@ -11,6 +11,7 @@ Layers, lowest first; a file may include its own layer and the ones below:
   formats/          readers, writers, exporters' file side; may include the codecs' public
                     headers (codecs/*.h and codecs/<name>/<name>.h), not their internals
   cli/, mpi/        the programs: anything below, not each other
+  python/           the Python module: anything below cli/ and mpi/ (it is a program too)
   bench/, tests/    anything
 OpenCL headers (<CL/...>) only in core/cl_api.h, and that only in the runtime's device half, so
 everything else builds without OpenCL (BTFC_OPENCL=OFF).
@@ -44,7 +45,7 @@ def allowed(src, dst):
     """None when src may include dst, else the rule it breaks."""
     sl, scodec = layer_of(src)
     dl, dcodec = layer_of(dst)
-    if dl not in ("core", "framework", "codec", "formats", "kernels", "cli", "mpi", "tests", "bench"):
+    if dl not in ("core", "framework", "codec", "formats", "kernels", "cli", "mpi", "python", "tests", "bench"):
         return None  # generated files (build/) and system-like paths are not ours to rule
     if sl in ("bench", "tests"):
         return None
@@ -78,6 +79,8 @@ def allowed(src, dst):
         return None if dl != "mpi" else "cli/ includes mpi/"
     if sl == "mpi":
         return None if dl != "cli" else "mpi/ includes cli/"
+    if sl == "python":
+        return None if dl not in ("cli", "mpi") else f"python/ includes {dl}/: the module calls the libraries, not a program"
     if sl == "kernels":
         return None if dl == "kernels" else "kernels/ include only kernels/"
     return None
@@ -87,7 +90,7 @@ def main():
     root = os.path.abspath(sys.argv[1] if len(sys.argv) > 1 else os.path.join(os.path.dirname(__file__), ".."))
     bad = []
     checked = 0
-    for top in ("core", "codecs", "formats", "cli", "mpi", "kernels"):
+    for top in ("core", "codecs", "formats", "cli", "mpi", "python", "kernels"):
         for dirpath, _, files in os.walk(os.path.join(root, top)):
             for f in sorted(files):
                 if not f.endswith(SOURCES):
