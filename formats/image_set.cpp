@@ -1,13 +1,12 @@
-// Image-set BTF reader/writer through OpenImageIO (formats.md 2.1 / 2.3; contract in image_set.h).
+// Image-set BTF reader/writer (formats.md 2.1 / 2.3; contract in image_set.h). The image files
+// go through OpenImageIO, loaded on first use (formats/image_file.h).
 //
 // Pixel orientation: texel (x, y) is column x, row y of the image file with y = 0 the *top* row
 // (OIIO scanline 0), for every format. Colour: 8/16-bit integer images are sRGB-decoded with the
 // exact sRGB EOTF (no OIIO colour conversion); EXR/HDR floats are taken as they are (UTIA EXRs are
 // CIE XYZ: the three channels are kept in file order, not converted).
-// OIIO can throw (e.g. std::bad_alloc, fmt errors); every exception stops at this adapter.
 #include "formats/image_set.h"
 
-#include <OpenImageIO/imageio.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -20,6 +19,8 @@
 #include <memory>
 #include <regex>
 #include <set>
+
+#include "formats/image_file.h"
 
 namespace btfc {
 namespace fs = std::filesystem;
@@ -179,28 +180,21 @@ Status decode_images(const std::vector<ImageFile>& files, size_t first, size_t l
   const size_t px = d.num_texels();
   for (size_t i = first; i < last; ++i) {
     const std::string name = files[i].path.string();
-    OIIO::ImageSpec config;
-    config.attribute("oiio:UnassociatedAlpha", 1);  // PNG alpha must not premultiply the colour
-    auto in = OIIO::ImageInput::open(name, &config);
-    if (!in) return io_error(name + ": cannot open image: " + OIIO::geterror());
-    in->threads(1);  // parallelism is across files
-    const OIIO::ImageSpec& spec = in->spec();
-    if (spec.width != d.width || spec.height != d.height || spec.depth > 1)
+    float* dst = out + (i - first) * px * 3;
+    bytes.resize(px * 3);
+    // 8-bit files of a non-linear format come as bytes (sRGB-decoded by the table below).
+    BTFC_ASSIGN_OR_RETURN(const image_file::Info spec,
+                          image_file::read_rgb(name, d.width, d.height, is_linear_format(files[i].path) ? nullptr : bytes.data(), dst));
+    if (!spec.size_ok)
       return corrupt_data(name + ": image is " + std::to_string(spec.width) + "x" + std::to_string(spec.height) +
                           ", expected " + std::to_string(d.width) + "x" + std::to_string(d.height) + " (the size of " +
                           files[0].path.filename().string() + ")");
-    if (spec.nchannels < 3)
-      return unsupported(name + ": image has " + std::to_string(spec.nchannels) + " channels, need at least 3 (RGB)");
-    float* dst = out + (i - first) * px * 3;
-    if (!is_linear_format(files[i].path) && spec.format == OIIO::TypeDesc::UINT8) {
-      bytes.resize(px * 3);
-      if (!in->read_image(0, 0, 0, 3, OIIO::TypeDesc::UINT8, bytes.data()))
-        return io_error(name + ": cannot read pixels: " + in->geterror());
+    if (spec.channels < 3)
+      return unsupported(name + ": image has " + std::to_string(spec.channels) + " channels, need at least 3 (RGB)");
+    if (spec.is_uint8) {
       const auto& lut = srgb_lut();
       for (size_t k = 0; k < px * 3; ++k) dst[k] = lut[bytes[k]];
     } else {
-      if (!in->read_image(0, 0, 0, 3, OIIO::TypeDesc::FLOAT, dst))
-        return io_error(name + ": cannot read pixels: " + in->geterror());
       if (is_linear_format(files[i].path)) {
         for (size_t k = 0; k < px * 3; ++k)
           if (!std::isfinite(dst[k]))
@@ -282,10 +276,9 @@ Status plan_impl(const std::string& path, BtfDesc& desc, std::vector<ImageFile>&
 
   // The first image fixes the size.
   {
-    auto in = OIIO::ImageInput::open(files[0].path.string());
-    if (!in) return io_error(files[0].path.string() + ": cannot open image: " + OIIO::geterror());
-    desc.width = in->spec().width;
-    desc.height = in->spec().height;
+    BTFC_ASSIGN_OR_RETURN(const image_file::Info first, image_file::info(files[0].path.string()));
+    desc.width = first.width;
+    desc.height = first.height;
   }
   return desc.validate().with_context(path);
 }
@@ -458,7 +451,7 @@ Result<std::vector<Angles>> name_set(const DirectionSet& s, const char* what) {
 
 // Writes image (l, v) to `file` (inside the temp directory); errors name `shown`, its final path.
 Status write_one(const Btf& btf, size_t l, size_t v, const std::string& file, const std::string& shown,
-                 ImageFormat format, OIIO::TypeDesc exr_type, std::vector<float>& buf, std::vector<uint8_t>& bytes) {
+                 ImageFormat format, image_file::FileType exr_type, std::vector<float>& buf, std::vector<uint8_t>& bytes) {
   const BtfDesc& d = btf.desc();
   const ImageView img = btf.image(l, v);
   buf.resize(d.num_texels() * 3);
@@ -470,24 +463,13 @@ Status write_one(const Btf& btf, size_t l, size_t v, const std::string& file, co
           return invalid_argument(shown + ": non-finite value at texel (" + std::to_string(x) + ", " + std::to_string(y) + ")");
         buf[(size_t(y) * d.width + x) * 3 + c] = val;
       }
-  OIIO::ImageSpec spec(d.width, d.height, 3, format == ImageFormat::exr ? exr_type : OIIO::TypeDesc::UINT8);
-  const void* pixels = buf.data();
-  OIIO::TypeDesc in_type = OIIO::TypeDesc::FLOAT;
   if (format == ImageFormat::png) {
-    spec.attribute("oiio:ColorSpace", "sRGB");
     bytes.resize(buf.size());
     for (size_t k = 0; k < buf.size(); ++k)
       bytes[k] = uint8_t(std::lround(255.0 * linear_to_srgb(std::clamp(double(buf[k]), 0.0, 1.0))));
-    pixels = bytes.data();
-    in_type = OIIO::TypeDesc::UINT8;
+    return image_file::write_rgb(file, shown, d.width, d.height, bytes.data(), nullptr, image_file::FileType::srgb8);
   }
-  auto out = OIIO::ImageOutput::create(file);
-  if (!out) return io_error(shown + ": no image writer: " + OIIO::geterror());
-  out->threads(1);
-  if (!out->open(file, spec)) return io_error(shown + ": cannot create: " + out->geterror());
-  if (!out->write_image(in_type, pixels)) return io_error(shown + ": cannot write: " + out->geterror());
-  if (!out->close()) return io_error(shown + ": cannot close: " + out->geterror());
-  return {};
+  return image_file::write_rgb(file, shown, d.width, d.height, nullptr, buf.data(), exr_type);
 }
 
 // Writes an image set into a temporary directory next to `dir`, part by part, and renames it
@@ -525,10 +507,10 @@ class SetWriter {
   Status write(const Btf& part, size_t l0, size_t v0) {
     const BtfDesc& pd = part.desc();
     // Half keeps EXRs small (UTIA stores half); values beyond its range (HDR) need float.
-    OIIO::TypeDesc exr_type = OIIO::TypeDesc::HALF;
+    image_file::FileType exr_type = image_file::FileType::half;
     for (size_t i = 0; i < part.size() && m_format == ImageFormat::exr; ++i)
       if (std::fabs(part.data()[i]) > 65000.0f) {
-        exr_type = OIIO::TypeDesc::FLOAT;
+        exr_type = image_file::FileType::float32;
         break;
       }
     const char* ext = m_format == ImageFormat::exr ? "exr" : "png";

@@ -1,12 +1,13 @@
 #include "formats/preview.h"
 
-#include <OpenImageIO/imageio.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+
+#include "formats/image_file.h"
 
 namespace btfc {
 
@@ -19,27 +20,19 @@ Status write_rgb_image(const std::string& path, const RgbImage& img) {
   const bool png = ext == ".png";
   // The temporary keeps the extension: OIIO picks the writer by it.
   const std::string tmp = path + ".tmp-" + std::to_string(getpid()) + ext;
-  OIIO::ImageSpec spec(img.width, img.height, 3, png ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::HALF);
   std::vector<uint8_t> bytes;
-  const void* pixels = img.rgb.data();
-  OIIO::TypeDesc in_type = OIIO::TypeDesc::FLOAT;
   if (png) {
-    spec.attribute("oiio:ColorSpace", "sRGB");
     bytes.resize(img.rgb.size());
     for (size_t k = 0; k < bytes.size(); ++k) {
       const double c = std::isfinite(img.rgb[k]) ? std::clamp(double(img.rgb[k]), 0.0, 1.0) : 0.0;
       bytes[k] = uint8_t(std::lround(255.0 * (c <= 0.0031308 ? 12.92 * c : 1.055 * std::pow(c, 1.0 / 2.4) - 0.055)));
     }
-    pixels = bytes.data();
-    in_type = OIIO::TypeDesc::UINT8;
   }
-  auto out = OIIO::ImageOutput::create(tmp);
-  if (!out) return io_error(path + ": no image writer: " + OIIO::geterror());
-  bool ok = out->open(tmp, spec) && out->write_image(in_type, pixels) && out->close();
-  if (!ok) {
-    const std::string err = out->geterror();
+  Status s = png ? image_file::write_rgb(tmp, path, img.width, img.height, bytes.data(), nullptr, image_file::FileType::srgb8)
+                 : image_file::write_rgb(tmp, path, img.width, img.height, nullptr, img.rgb.data(), image_file::FileType::half);
+  if (!s.ok()) {
     std::remove(tmp.c_str());
-    return io_error(path + ": cannot write: " + err);
+    return s;
   }
   if (std::rename(tmp.c_str(), path.c_str()) != 0) {
     std::remove(tmp.c_str());

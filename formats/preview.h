@@ -1,4 +1,4 @@
-// Writing single RGB images (renders, side-by-side previews) through OpenImageIO.
+// Writing single RGB images (renders, side-by-side previews) through OpenImageIO (formats/image_file.h).
 // The extension picks the format: .png -> 8-bit sRGB (values clamped to [0, 1], linear input
 // encoded with the sRGB curve), .exr -> linear half float. Written to a temporary name and
 // renamed, so a failure leaves no partial file; errors name the path.

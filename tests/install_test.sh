@@ -19,12 +19,16 @@ P="$W/prefix"
 check install 0 "$CMAKE" --install "$BUILD_DIR" --prefix "$P"
 for f in bin/btfc share/man/man1/btfc.1 share/bash-completion/completions/btfc lib/cmake/btfc/btfcConfig.cmake \
          lib/cmake/btfc/btfcTargets.cmake lib/libbtfc_core.a lib/libbtfc_io.a include/btfc/codecs/codec.h \
-         include/btfc/formats/reader.h include/btfc/core/btf.h include/btfc/kernels/btfc_shared.h share/btfc/kernels/fmf.cl; do
+         include/btfc/formats/reader.h include/btfc/core/btf.h include/btfc/kernels/btfc_shared.h share/btfc/kernels/fmf.cl \
+         lib/btfc/libbtfc_imageio.so; do
   [ -s "$P/$f" ] || { echo "FAIL installed: $f"; fails=$((fails + 1)); missing=1; }
 done
 [ -z "${missing:-}" ] && echo "ok   installed-files"
 BTFC="$P/bin/btfc"
 check installed-program 0 "$BTFC" -q synth --width 12 --height 10 --seed 4 -o "$W/s.btfc"
+# An image set (EXR), written by the installed program through the installed image plugin: the
+# consumer reads it, so it must find the plugin of its prefix, not the build tree's.
+check installed-images 0 "$BTFC" -q synth --width 12 --height 10 --seed 4 -o "$W/set"
 
 # The consumer, outside the source tree, sees only the prefix.
 cp -r "$SOURCE_DIR/tests/consumer" "$W/consumer-src"
@@ -32,10 +36,11 @@ check consumer-configure 0 "$CMAKE" -S "$W/consumer-src" -B "$W/consumer-build" 
   -DCMAKE_PREFIX_PATH="$P" -DCMAKE_CXX_COMPILER="$CXX"
 check consumer-build 0 "$CMAKE" --build "$W/consumer-build"
 mkdir -p "$W/c"
-check consumer-run 0 "$W/consumer-build/btfc_consumer" "$W/s.btfc" fmf:rank=6 "$W/c"
+check consumer-run 0 "$W/consumer-build/btfc_consumer" "$W/set" fmf:rank=6 "$W/c"
 cp "$W/out.txt" "$W/consumer.json"
-check cli-compress 0 "$BTFC" -q compress "$W/s.btfc" -c fmf:rank=6 -o "$W/cli.btfc"
-check cli-compare 0 "$BTFC" --json compare "$W/s.btfc" "$W/cli.btfc"
+expect_grep consumer-uses-prefix-plugin "\"imageio\": \"$P/lib/btfc/libbtfc_imageio.so\"" "$W/consumer.json"
+check cli-compress 0 "$BTFC" -q compress "$W/set" -c fmf:rank=6 -o "$W/cli.btfc"
+check cli-compare 0 "$BTFC" --json compare "$W/set" "$W/cli.btfc"
 cp "$W/out.txt" "$W/cli-compare.json"
 check same-model 0 "$BTFC" --json compare "$W/cli.btfc" "$W/c/consumer.btfc"
 cp "$W/out.txt" "$W/same.json"
@@ -71,7 +76,7 @@ import json, subprocess, sys
 import btfc
 w, prefix = sys.argv[1], sys.argv[2]
 assert btfc.__file__.startswith(prefix), btfc.__file__
-b = btfc.open(f"{w}/s.btfc")
+b = btfc.open(f"{w}/set")
 m = btfc.compress(b, "fmf:rank=6")
 r = btfc.compare(b, m.decode())
 cli = json.load(open(f"{w}/cli-compare.json"))

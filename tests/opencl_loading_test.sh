@@ -11,10 +11,11 @@ source "$(dirname "$0")/cli_lib.sh"  # check, expect_grep
 # This test sets the device choice itself: the suite's CPU pass must not decide it.
 unset BTFC_FORCE_CPU
 
-# ld.so's own log (LD_DEBUG=files) of what a process loads. Note that `btfc` maps the ICD loader
-# at start anyway on Debian, as a dependency of OpenImageIO's FFmpeg (libavutil), so the checks
-# are on what btfc itself does: its dlopen() of libOpenCL ("opening file=...libOpenCL") and an
-# OpenCL driver loaded by the ICD loader ("dynamically loaded by ...libOpenCL", PoCL and LLVM here).
+# ld.so's own log (LD_DEBUG=files) of what a process loads. A job that reads an image set maps the
+# ICD loader anyway on Debian, as a dependency of OpenImageIO's FFmpeg (libavutil; OpenImageIO is
+# loaded on first use, formats/image_file.h), so the checks are on what btfc itself does: its
+# dlopen() of libOpenCL ("opening file=...libOpenCL") and an OpenCL driver loaded by the ICD
+# loader ("dynamically loaded by ...libOpenCL", PoCL and LLVM here).
 # Plain greps on the files: `cat | grep -q` fails under pipefail when grep stops early.
 k_btfc_dlopen='opening file=[^ ]*libOpenCL|file=libOpenCL[^ ]* \[0\];  dynamically loaded by'
 k_driver='dynamically loaded by [^ ]*libOpenCL'

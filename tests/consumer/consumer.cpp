@@ -12,6 +12,7 @@
 #include "core/metrics.h"
 #include "formats/btf_io.h"
 #include "formats/gpu/export.h"
+#include "formats/image_file.h"
 #include "formats/reader.h"
 
 using namespace btfc;
@@ -67,7 +68,9 @@ int main(int argc, char** argv) {
   auto bundle = gpu::build_export(m, gpu::ExportOptions{});
   if (!bundle.ok()) return fail(bundle.status());
   if (Status s = gpu::write_export_dir(bundle.value(), dir + "/gpu"); !s.ok()) return fail(s);
-  std::printf("{\"spec\": \"%s\", \"psnr\": %.17g, \"rmse\": %.17g, \"region_max_diff\": %.17g, \"eval\": [%.9g, %.9g, %.9g]}\n",
-              m.spec().c_str(), metrics->psnr, metrics->rmse, region_diff, value[0], value[1], value[2]);
+  // Which image plugin served an image-set input (the installed one: btfcConfig.cmake's path).
+  const std::string plugin = image_file::loaded() ? image_file::plugin_path() : "";
+  std::printf("{\"spec\": \"%s\", \"psnr\": %.17g, \"rmse\": %.17g, \"region_max_diff\": %.17g, \"eval\": [%.9g, %.9g, %.9g], \"imageio\": \"%s\"}\n",
+              m.spec().c_str(), metrics->psnr, metrics->rmse, region_diff, value[0], value[1], value[2], plugin.c_str());
   return 0;
 }
