@@ -7,6 +7,7 @@
 #include <optional>
 
 #include "core/metrics.h"
+#include "core/svd.h"
 
 namespace btfc {
 namespace {
@@ -211,6 +212,8 @@ Result<TargetChoice> choose_for_target(const Btf& btf, const std::string& spec, 
       (target.kind == Target::Kind::max_bytes && target.value < 1))
     return invalid_argument("target " + std::string(kind_name(target.kind)) + " " + std::to_string(target.value) + " is out of range");
   BTFC_ASSIGN_OR_RETURN(auto resolved, resolve_spec(spec));
+  // Every probe factorizes the same data: an exact SVD is computed once and truncated per probe.
+  const ExactSvdReuse reuse;
   if (const char* why = resolved.first->no_budget_search(); why && target.kind == Target::Kind::max_bytes)
     return unsupported(std::string(resolved.first->name()) + ": --max-bytes is not supported: " + why);
   const std::vector<std::string> variants = resolved.first->budget_variants();

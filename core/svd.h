@@ -5,7 +5,10 @@
 //  - exact: eigen-decomposition, in double, of the smaller Gram matrix (B B^T when m <= n, else
 //    B^T B). The kept components are then exactly the top singular triplets up to double
 //    round-off, so the rank-C error equals the Eckart-Young optimum sum_{i>C} sigma_i^2.
-//    Cost min(m,n)^2 max(m,n): right for matrices with one small side (one view, few texels).
+//    Cost min(m,n)^2 max(m,n) for the Gram matrix plus min(m,n)^3 for its eigendecomposition
+//    (LAPACK's dsyevd from k = 1025 on when built with OpenBLAS): right for matrices with one
+//    small side (one view, few texels), and for large ranks of a side up to 4096, where it costs
+//    the same at every rank and less than a sketch of 1/8 of that side.
 //  - randomized (Halko, Martinsson, Tropp 2011, Alg. 4.4 with re-orthonormalised power
 //    iterations): sketch Y = B Omega with l = C + oversample Gaussian columns, q power
 //    iterations, Q = orth(Y), then the small SVD of Q^T B. Each pass over B is one float GEMM
@@ -18,6 +21,7 @@
 // component is always kept so shapes stay non-empty (all-zero input -> one zero component).
 #pragma once
 #include <Eigen/Core>
+#include <cstddef>
 #include <cstdint>
 #include <string>
 
@@ -26,7 +30,10 @@
 
 namespace btfc {
 
+// automatic: exact when the small side is <= 1024, or <= k_exact_auto_max and the sketch
+// (rank + oversample) would be at least 1/8 of it; else randomized.
 enum class SvdMethod { automatic, exact, randomized };
+constexpr size_t k_exact_auto_max = 4096;
 
 struct SvdOptions {
   int max_rank = 32;
@@ -66,5 +73,19 @@ int choose_rank(const Eigen::VectorXd& lambda, double total, const SvdOptions& o
 
 // B is column-major with leading dimension m. Fails on m == 0 or n == 0.
 Result<SvdResult> truncated_svd(const float* B, size_t m, size_t n, const SvdOptions& opt);
+
+// While one of these is alive, the exact path keeps the eigendecompositions of the Gram matrices
+// it computes (the last three) and reuses one for a matrix of the same shape and content (a
+// 64-bit fingerprint of every value): a byte-budget search (codecs/target.h) probes fmf at many
+// ranks of one matrix, and the decomposition, which does not depend on the rank, is most of
+// each probe's cost. Results are the same with or without it. Not for concurrent searches.
+class ExactSvdReuse {
+ public:
+  ExactSvdReuse();
+  ~ExactSvdReuse();
+  ExactSvdReuse(const ExactSvdReuse&) = delete;
+  ExactSvdReuse& operator=(const ExactSvdReuse&) = delete;
+  static size_t reuses();  // how many exact SVDs were served from it (tests)
+};
 
 }  // namespace btfc

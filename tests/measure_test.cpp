@@ -2,12 +2,15 @@
 // targeting (codecs/target.h) and the CPU renderer (codecs/render.h).
 #include <gtest/gtest.h>
 
+#include <cstring>
+
 #include <cmath>
 
 #include "codecs/fmf/fmf.h"
 #include "codecs/lpca/lpca.h"
 #include "codecs/measure.h"
 #include "codecs/target.h"
+#include "core/svd.h"
 #include "core/synth.h"
 
 using namespace btfc;
@@ -149,19 +152,50 @@ TEST(Target, ByteBudgetChoosesTheLargestThatFits) {
 }
 
 TEST(Target, ByteBudgetProbesNoKnobAboveTheCodecsLimit) {
-  const Btf b = small_btf(24, 24);  // 576 texels: fmf's budget limit is 576 / 64 = 9 components
-  ASSERT_EQ(fmf_codec().budget_knob_limit(b.desc()), 9);
+  const Btf b = small_btf(24, 24);  // 576 texels: lpca's budget limit is 576 / 64 = 9 components
+  const Codec* lpca = find_codec("lpca");
+  ASSERT_NE(lpca, nullptr);
+  ASSERT_EQ(lpca->budget_knob_limit(b.desc()), 9);
   Context ctx;
-  const Target all{Target::Kind::max_bytes, 1e12};  // a budget no rank fills
-  auto c = choose_for_target(b, "fmf:precision=half:rank=2", all, ctx);
+  const Target all{Target::Kind::max_bytes, 1e12};  // a budget no setting fills
+  auto c = choose_for_target(b, "lpca:clusters=1:precision=half:components=2", all, ctx);
   ASSERT_TRUE(c.ok()) << c.status().message();
   EXPECT_EQ(int(c->knob_value), 9);
   EXPECT_EQ(c->knob_limit, 9);
   for (const TargetProbe& p : c->probes) EXPECT_LE(p.knob, 9);
   // The spec's own value is always allowed.
-  auto own = choose_for_target(b, "fmf:precision=half:rank=12", all, ctx);
+  auto own = choose_for_target(b, "lpca:clusters=1:precision=half:components=12", all, ctx);
   ASSERT_TRUE(own.ok()) << own.status().message();
   EXPECT_EQ(int(own->knob_value), 12);
+}
+
+TEST(Target, FmfByteBudgetReachesAnyRankWhereTheExactSvdServesAll) {
+  // A matrix whose small side is <= 4096 is factorized exactly at one cost for every rank
+  // (core/svd.h), so fmf's budget limit is a quarter of that side, and the search computes the
+  // decomposition once (ExactSvdReuse) for all its probes and settings.
+  const Btf b = small_btf(24, 24);
+  const long long side = (long long)std::min(b.desc().abrdf_size(), b.desc().num_texels());
+  EXPECT_EQ(fmf_codec().budget_knob_limit(b.desc()), side / 4);
+  Context ctx;
+  const size_t before = ExactSvdReuse::reuses();
+  const double budget = 400000;  // bytes: well above rank 9 (the old limit) at half precision
+  auto c = choose_for_target(b, "fmf", Target{Target::Kind::max_bytes, budget}, ctx);
+  ASSERT_TRUE(c.ok()) << c.status().message();
+  const size_t reuses = ExactSvdReuse::reuses() - before;
+  std::printf("chose %s (%.0f bytes, %.2f dB) after %zu probes, %zu exact SVDs reused\n", c->spec.c_str(), c->measure, c->psnr,
+              c->probes.size(), reuses);
+  EXPECT_LE(c->model->payload_bytes(), budget);
+  EXPECT_GT(c->knob_value, 9);
+  EXPECT_EQ(reuses + 1, c->probes.size());  // one decomposition for every probe
+  // The chosen model is what a plain encode of its spec gives.
+  auto again = resolve_spec(c->spec);
+  ASSERT_TRUE(again.ok());
+  auto m = again->first->encode(b, again->second, ctx);
+  ASSERT_TRUE(m.ok());
+  Btf x, y;
+  ASSERT_TRUE(c->model->decode_all(x).ok());
+  ASSERT_TRUE(m.value()->decode_all(y).ok());
+  EXPECT_EQ(0, std::memcmp(x.data(), y.data(), x.size() * sizeof(float)));
 }
 
 TEST(Target, CodecsThatCannotBeSearchedSaySoForAByteBudget) {

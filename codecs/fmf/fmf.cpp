@@ -2,6 +2,7 @@
 // stored tensors, fmf_model.h for how the files of this folder divide the work.
 #include <Eigen/Core>
 #include <Imath/half.h>
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -9,6 +10,7 @@
 #include "codecs/fmf/fmf_model.h"
 #include "codecs/fmf/ooc_fmf.h"
 #include "core/quant.h"
+#include "core/svd.h"
 
 namespace btfc {
 namespace fmf {
@@ -18,7 +20,7 @@ const ParamSpec k_params[] = {
     {"chroma_rank", ParamSpec::Type::integer, "0", 0, 4096, {}, "color=dfmf: components of the U and V channels (0 = rank)"},
     {"target_error", ParamSpec::Type::real, "0", 0, 1, {}, "if > 0: smallest rank whose relative L2 error of the data (decoded vs input) is <= this"},
     {"color", ParamSpec::Type::choice, "rgb", 0, 0, {"rgb", "dfmf"}, "rgb: colour in the matrix rows (paper); dfmf: per-channel log-luminance/chroma (Bonn DFMF model 11)"},
-    {"svd", ParamSpec::Type::choice, "auto", 0, 0, {"auto", "exact", "randomized"}, "auto: exact when the small side of the matrix is <= 1024, else randomized"},
+    {"svd", ParamSpec::Type::choice, "auto", 0, 0, {"auto", "exact", "randomized"}, "auto: exact when the small side of the matrix is <= 1024, or <= 4096 with rank + oversample >= 1/8 of it, else randomized"},
     {"oversample", ParamSpec::Type::integer, "16", 0, 1024, {}, "randomized SVD: extra sketch columns"},
     {"power_iters", ParamSpec::Type::integer, "4", 0, 32, {}, "randomized SVD: power iterations"},
     {"precision", ParamSpec::Type::choice, "half", 0, 0, {"half", "float", "q"},
@@ -103,7 +105,18 @@ class FmfCodec final : public Codec {
   std::vector<std::string> budget_variants() const override {
     return {"precision=half", "precision=q:bits=8", "precision=q:bits=6", "precision=q:bits=5", "precision=q:bits=4"};
   }
-  long long budget_knob_limit(const BtfDesc& d) const override { return components_backed_by_texels(d); }
+  // Where the exact SVD serves every rank at one cost (the matrix's small side <= 4096: the 64 x 64
+  // textile, any BTF of few texels or directions; a search computes it once, ExactSvdReuse), a
+  // byte budget may reach a quarter of that side: one rank per 64 texels was far below what a
+  // budget of 1:50 - 1:100 buys (issue 22: at 1:100 on the textile, q8 rank 554 at 62.2 dB where
+  // the limit's rank 64 gave 51.9), while ranks near the full side cost most (quantizing and
+  // coding the widest factors) and gave less (q6 at rank 4096: 60.3 dB). Larger matrices: one per
+  // 64 texels, each randomized probe's cost growing with the rank.
+  long long budget_knob_limit(const BtfDesc& d) const override {
+    const size_t small = std::min(d.abrdf_size(), d.num_texels());
+    const long long per_texels = components_backed_by_texels(d);
+    return small <= k_exact_auto_max ? std::max(per_texels, (long long)(small / 4)) : per_texels;
+  }
   const StreamingEncoder* streaming() const override { return &fmf_streaming(); }
 
   Result<std::unique_ptr<Model>> encode(const Btf& btf, const Params& p, Context& ctx) const override {
