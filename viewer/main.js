@@ -18,7 +18,7 @@ const pair = (s, d) => (s ? s.split(',').map(Number) : d);
 // change them.
 const S = {
   mode: params.get('mode') || 'sphere',           // flat | plane | sphere | cloth
-  light: pair(params.get('light'), [40, 30]),      // theta, phi (degrees)
+  light: pair(params.get('light'), [45, 240]),     // theta, phi (degrees): in front, left of the camera
   view: pair(params.get('view'), [0, 0]),          // flat mode's view direction
   distance: Number(params.get('distance') ?? 0),   // 0: directional
   intensity: Number(params.get('intensity') ?? 1),

@@ -12,14 +12,31 @@
 # install fails. Usage: BTFC=... CROP=... DATA_DIR=... SOURCE_DIR=... VIEWER_DIR=... browser_test.sh WORK
 set -uo pipefail
 W=$1
+rm -rf "$W" && mkdir -p "$W" || exit 1
+
+# `btfc view` refuses what it cannot serve, before any server starts (no browser needed).
+mkdir -p "$W/not_an_export"
+out=$("$BTFC" view "$W/not_an_export" --port 0 2>&1); rc=$?
+[ $rc -eq 1 ] && grep -q "no manifest.json: not a btfc export directory" <<<"$out" \
+  || { echo "FAIL view of a directory without manifest.json: exit $rc: $out"; exit 1; }
+echo "ok   view refuses a directory without manifest.json: $out"
+echo '{}' > "$W/not_an_export/manifest.json"
+out=$("$BTFC" view "$W/not_an_export" --port 0 --viewer "$W/nowhere" 2>&1); rc=$?
+[ $rc -eq 1 ] && grep -q "web viewer was not found" <<<"$out" || { echo "FAIL view without the viewer: exit $rc: $out"; exit 1; }
+echo "ok   view without the viewer installed: $out"
+
 CHROMIUM=$(command -v chromium || command -v chromium-browser || true)
 [ -n "$CHROMIUM" ] || { echo "chromium not found: viewer browser test skipped (apt-get install chromium)"; exit 77; }
 command -v node >/dev/null || { echo "node not found: viewer browser test skipped (apt-get install nodejs npm)"; exit 77; }
 bash "$SOURCE_DIR/viewer/install.sh" "$VIEWER_DIR"; rc=$?
 [ $rc -eq 0 ] || exit $rc
+out=$(timeout 2 "$BTFC" view "$W/not_an_export" --port 0 --viewer "$VIEWER_DIR" 2>&1)
+grep -q "built without cpp-httplib" <<<"$out" && { echo "btfc was built without cpp-httplib: viewer browser test skipped ($out)"; exit 77; }
+grep -q "btfc viewer at http://127.0.0.1:" <<<"$out" || { echo "FAIL btfc view did not print its URL: $out"; exit 1; }
+echo "ok   view prints its URL: $out"
 TEXTILE=$DATA_DIR/textile_lurex_utia64
 [ -d "$TEXTILE" ] || { echo "FAIL test data missing: $TEXTILE"; exit 1; }
-rm -rf "$W" && mkdir -p "$W" && cd "$W" || exit 1
+cd "$W" || exit 1
 
 # The fixed scene: view from theta 30 phi 90, point light at theta 40 phi 30, 2 sample widths
 # away; +1 EV and reinhard, so the textile's highlights (450 x the median) stay in 8 bits.

@@ -12,7 +12,7 @@ mkdir -p "$OUT"
 # lpca with an environment (PRT maps), for the environment-lighting shot.
 rm -rf "$W/lpca.env"
 "$BUILD/btfc" -q export "$W/lpca.btfc" --to "$W/lpca.env" --env "$SRC/docs/examples/sky.exr" --no-previews
-L="light=40,30&exposure=1&tonemap=reinhard"
+L="light=45,240&exposure=1&tonemap=reinhard"
 shots=""
 add() { shots+="${shots:+,}{\"name\": \"$1\", \"dir\": \"$2\", \"query\": \"$3\"}"; }
 for c in fmf lpyr lpca mlvq; do
@@ -20,7 +20,7 @@ for c in fmf lpyr lpca mlvq; do
   add "$c-flat" "$W/$c" "$L&mode=flat&zoom=4&view=30,90&distance=2"
 done
 add fmf-cloth "$W/fmf" "$L&mode=cloth&size=256&repeat=2"
-add lpca-environment "$W/lpca.env" "lightkind=env&exposure=1&tonemap=reinhard&mode=sphere&size=256&repeat=2"
+add lpca-environment "$W/lpca.env" "lightkind=env&exposure=-1.5&tonemap=reinhard&mode=sphere&size=256&repeat=2"
 add lpyr-lod1 "$W/lpyr" "$L&mode=sphere&size=256&repeat=2&lod=1"
 for c in fmf lpyr lpca mlvq; do add "$c-sphere-512" "$W/$c" "$L&mode=sphere&size=512&repeat=3"; done
 cat > "$W/shots.json" <<JSON
