@@ -18,10 +18,14 @@ out vec4 btfv_color;
 
 vec3 btfv_eval(vec2 uv, vec3 wl, vec3 wv, float lod) {
 #ifdef HAS_LOD
-  return btf_eval_lod(uv, wl, wv, lod);
+  vec3 c = btf_eval_lod(uv, wl, wv, lod);
 #else
-  return btf_eval(uv, wl, wv);
+  vec3 c = btf_eval(uv, wl, wv);
 #endif
+#ifdef GREY
+  c = c.rrr;   // a 1-channel BTF fills red only (the contract); shown grey, as btfc render does
+#endif
+  return c;
 }
 // Radiance leaving surface point p (world) with frame t, b, n towards unit direction wv_world.
 vec3 btfv_shade(vec2 uv, vec3 p, vec3 t, vec3 b, vec3 n, vec3 wv_world, float lod) {
@@ -134,6 +138,7 @@ export function makeMaterial(exp, flat, uniforms) {
   const defines = { BTFC_NO_MAIN: '' };
   if (f.lod) defines.HAS_LOD = '';
   if (f.relit) defines.HAS_RELIT = '';
+  if (exp.manifest.btf.channels === 1) defines.GREY = '';
   const u = { ...uniforms };
   for (const [name, tex] of Object.entries(exp.textures)) u[`u_${name}`] = { value: tex };
   return new THREE.RawShaderMaterial({

@@ -14,7 +14,7 @@ rm -rf "$W/lpca.env"
 "$BUILD/btfc" -q export "$W/lpca.btfc" --to "$W/lpca.env" --env "$SRC/docs/examples/sky.exr" --no-previews
 L="light=45,240&exposure=1&tonemap=reinhard"
 shots=""
-add() { shots+="${shots:+,}{\"name\": \"$1\", \"dir\": \"$2\", \"query\": \"$3\"}"; }
+add() { shots+="${shots:+,}{\"name\": \"$1\", \"dir\": \"$2\", \"query\": \"$3\", \"measure\": true}"; }
 for c in fmf lpyr lpca mlvq; do
   add "$c-sphere" "$W/$c" "$L&mode=sphere&size=256&repeat=2"
   add "$c-flat" "$W/$c" "$L&mode=flat&zoom=4&view=30,90&distance=2"
