@@ -28,6 +28,7 @@ const S = {
   lod: Number(params.get('lod') ?? 0), autoLod: params.get('autolod') === '1',
   repeat: Number(params.get('repeat') ?? 3), bilinear: params.get('bilinear') === '1',  // bilinear: 4 x the cost
   zoom: Number(params.get('zoom') ?? 0),           // flat mode: CSS pixels per texel (0: fit)
+  continuous: params.get('continuous') === '1',     // redraw every frame, not only on changes
   size: Number(params.get('size') ?? 512),         // mesh modes: canvas pixels (software GL: keep small)
 };
 
@@ -149,14 +150,26 @@ function renderAll() {
   for (const p of panels) if (p.error && !p.el.classList.contains('failed')) errorPanel(p.el, p.error);
 }
 
-// Frame time: the time from one frame to the next while rendering continuously (what a user
-// feels), averaged over the last frames.
-let last = 0, avg = 0;
-function loop(t) {
-  if (last) avg = avg ? 0.9 * avg + 0.1 * (t - last) : t - last;
-  last = t;
-  renderAll();
-  $('frametime').textContent = avg ? `${avg.toFixed(1)} ms / frame (${(1000 / avg).toFixed(0)} fps)` : '';
+// Frames are drawn when something changed (on software GL one frame can take seconds, and a
+// loop drawing every frame would starve the controls), or every frame with "continuous".
+// Frame time: each frame finished by a 1-pixel read-back, so it is the GPU's time, not the
+// time to queue the commands; averaged over the last frames.
+let dirty = true, avg = 0;
+const invalidate = () => { dirty = true; };
+function loop() {
+  if (dirty || S.continuous) {
+    dirty = false;
+    const t0 = performance.now();
+    renderAll();
+    const px = new Uint8Array(4);
+    for (const p of panels.filter((q) => !q.error)) {
+      const gl = p.renderer.getContext();
+      gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
+    }
+    const ms = performance.now() - t0;
+    avg = avg ? 0.8 * avg + 0.2 * ms : ms;
+    $('frametime').textContent = `${avg.toFixed(1)} ms / frame (${(1000 / avg).toFixed(0)} fps)`;
+  }
   requestAnimationFrame(loop);
 }
 
@@ -171,13 +184,14 @@ function bindControls() {
       const val = el.type === 'checkbox' ? el.checked : conv(el.value);
       if (key.includes('.')) S[key.split('.')[0]][Number(key.split('.')[1])] = val; else S[key] = val;
       apply();
+      invalidate();
     });
   };
   bind('mode', 'mode', String); bind('lighttheta', 'light.0'); bind('lightphi', 'light.1');
   bind('distance', 'distance'); bind('intensity', 'intensity'); bind('exposure', 'exposure');
   bind('tonemap', 'tonemap', String); bind('lightkind', 'lightKind', String); bind('lod', 'lod');
   bind('autolod', 'autoLod'); bind('repeat', 'repeat'); bind('bilinear', 'bilinear');
-  bind('viewtheta', 'view.0'); bind('viewphi', 'view.1');
+  bind('viewtheta', 'view.0'); bind('viewphi', 'view.1'); bind('continuous', 'continuous');
   const live = panels.filter((p) => !p.error);
   const f = live.map((p) => features(p.exp.glsl));
   $('lodrow').hidden = !f.some((x) => x.lod);
@@ -201,6 +215,7 @@ function bindControls() {
     S.light[0] = Math.min(89, Math.max(0, drag.th + (e.clientY - drag.y) * 0.3));
     $('lighttheta').value = S.light[0].toFixed(0); $('lightphi').value = S.light[1].toFixed(0);
     apply();
+    invalidate();
   });
   wrap.addEventListener('pointerup', () => { drag = null; controls.enabled = true; });
   wrap.addEventListener('contextmenu', (e) => e.preventDefault());
@@ -214,6 +229,7 @@ async function main() {
   panels.sort((x, y) => urls.indexOf(x.url) - urls.indexOf(y.url));
   controls = new OrbitControls(camera, $('panels'));
   controls.mouseButtons.RIGHT = null;  // the right button drags the light
+  controls.addEventListener('change', invalidate);
   bindControls();
   apply();
   renderAll();  // compiles the shaders now, so a compile error is reported before "ready"
@@ -225,7 +241,7 @@ async function main() {
 // Hooks for tests and scripts (tests/viewer/browser_test.mjs).
 window.btfcViewer = {
   settings: S,
-  set(changes) { Object.assign(S, changes); apply(); renderAll(); },
+  set(changes) { Object.assign(S, changes); apply(); renderAll(); invalidate(); },
   errors: () => panels.filter((p) => p.error).map((p) => `${p.url}: ${p.error}`),
   // Milliseconds per frame over n frames, each finished (a 1-pixel read-back waits for the GPU).
   measure(n = 20) {

@@ -75,17 +75,20 @@ done
 first=$("$BTFC" codecs --names | head -1)
 "$BTFC" -q render "$first.btfc" -o wrong.render.png --view $VIEW --light 60,200 --distance $DIST --exposure $EV --tonemap reinhard || exit 1
 
-# Broken exports: a texture file missing; a manifest cut in the middle.
+# Broken exports: a texture file missing; a manifest cut in the middle; a texture cut short.
 cp -r "$first" missing_texture && rm "missing_texture/$(ls "$first" | grep ktx2 | head -1)"
 cp -r "$first" bad_manifest && head -c 200 "$first/manifest.json" > bad_manifest/manifest.json
 missing=$(ls "$first" | grep ktx2 | head -1)
+cut=$(ls "$first" | grep ktx2 | tail -1)
+cp -r "$first" truncated_ktx2 && head -c 1000 "$first/$cut" > "truncated_ktx2/$cut"
 
 cat > config.json <<JSON
 { "btfc": "$BTFC", "chromium": "$CHROMIUM", "query": "$QUERY",
   "cases": [$cases],
   "wrong_reference": "$W/wrong.render.png",
   "broken": [{"name": "missing texture", "dir": "$W/missing_texture", "expect": "($missing): missing"},
-             {"name": "bad manifest", "dir": "$W/bad_manifest", "expect": "manifest.json is not valid JSON"}],
+             {"name": "bad manifest", "dir": "$W/bad_manifest", "expect": "manifest.json is not valid JSON"},
+             {"name": "truncated texture", "dir": "$W/truncated_ktx2", "expect": "$cut: truncated"}],
   "side_by_side": ["$W/fmf", "$W/lpca"],
   "shots": [{"name": "shot_sphere_fmf", "dir": "$W/fmf", "query": "$QUERY&mode=sphere&size=256"}] }
 JSON
