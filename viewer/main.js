@@ -17,7 +17,8 @@ const pair = (s, d) => (s ? s.split(',').map(Number) : d);
 // Settings: the URL gives the start (so a test or a shared link reproduces a view), the controls
 // change them.
 const S = {
-  mode: params.get('mode') || 'sphere',           // flat | plane | sphere | cloth
+  mode: params.get('mode') || 'sphere',           // flat | rsphere (as btfc render) | plane | sphere | cloth
+  tiles: Number(params.get('tiles') ?? 1),          // rsphere: btfc render's --tiles
   light: pair(params.get('light'), [45, 240]),     // theta, phi (degrees): in front, left of the camera
   view: pair(params.get('view'), [0, 0]),          // flat mode's view direction
   distance: Number(params.get('distance') ?? 0),   // 0: directional
@@ -36,7 +37,7 @@ const uniforms = {
   u_light: { value: new THREE.Vector3() }, u_distance: { value: 0 }, u_intensity: { value: 1 },
   u_exposure: { value: 0 }, u_tonemap: { value: 1 }, u_light_kind: { value: 0 }, u_lod: { value: 0 },
   u_auto_lod: { value: false }, u_view: { value: new THREE.Vector3(0, 0, 1) }, u_camera: { value: new THREE.Vector3() },
-  u_size: { value: new THREE.Vector2(1, 1) }, u_bilinear: { value: true },
+  u_size: { value: new THREE.Vector2(1, 1) }, u_bilinear: { value: true }, u_canvas: { value: 512 }, u_tiles: { value: 1 },
 };
 
 const camera = new THREE.PerspectiveCamera(35, 1, 0.01, 100);
@@ -77,7 +78,8 @@ async function openPanel(url, el) {
       const log = gl.getShaderInfoLog(fs) || gl.getShaderInfoLog(vs) || gl.getProgramInfoLog(prog);
       p.error = `btf.frag does not compile with the viewer's main(): ${log}`;
     };
-    p.mats = { flat: makeMaterial(p.exp, true, uniforms), mesh: makeMaterial(p.exp, false, uniforms) };
+    p.mats = { flat: makeMaterial(p.exp, 'flat', uniforms), rsphere: makeMaterial(p.exp, 'rsphere', uniforms),
+      mesh: makeMaterial(p.exp, 'mesh', uniforms) };
     p.scene = new THREE.Scene();
     p.lightMarker = new THREE.Mesh(new THREE.SphereGeometry(0.04, 12, 8), new THREE.MeshBasicMaterial({ color: 0xffdd55 }));
     p.flatQuad = new THREE.Mesh(new THREE.PlaneGeometry(2, 2), p.mats.flat);
@@ -106,8 +108,11 @@ function apply() {
   uniforms.u_lod.value = S.lod;
   uniforms.u_auto_lod.value = S.autoLod;
   uniforms.u_bilinear.value = S.bilinear;
+  uniforms.u_canvas.value = S.size;
+  uniforms.u_tiles.value = S.tiles;
   const flat = S.mode === 'flat';
   for (const p of live) {
+    p.flatQuad.material = S.mode === 'rsphere' ? p.mats.rsphere : p.mats.flat;
     const btf = p.exp.manifest.btf;
     const canvas = p.renderer.domElement;
     if (flat) {
@@ -116,6 +121,9 @@ function apply() {
       p.renderer.setSize(btf.width, btf.height, false);
       canvas.style.width = `${btf.width * z}px`;
       canvas.style.height = `${btf.height * z}px`;
+    } else if (S.mode === 'rsphere') {
+      p.renderer.setSize(S.size, S.size, false);
+      canvas.style.width = canvas.style.height = `${S.size}px`;
     } else {
       p.renderer.setSize(S.size, S.size, false);
       canvas.style.width = canvas.style.height = `${S.size}px`;
@@ -137,7 +145,7 @@ function apply() {
 function renderPanel(p) {
   const btf = p.exp.manifest.btf;
   uniforms.u_size.value.set(btf.width, btf.height);
-  if (S.mode === 'flat') {
+  if (S.mode === 'flat' || S.mode === 'rsphere') {
     p.renderer.render(p.flatScene, p.flatCamera);
   } else {
     uniforms.u_camera.value.copy(camera.position);
@@ -191,7 +199,7 @@ function bindControls() {
   bind('distance', 'distance'); bind('intensity', 'intensity'); bind('exposure', 'exposure');
   bind('tonemap', 'tonemap', String); bind('lightkind', 'lightKind', String); bind('lod', 'lod');
   bind('autolod', 'autoLod'); bind('repeat', 'repeat'); bind('bilinear', 'bilinear');
-  bind('viewtheta', 'view.0'); bind('viewphi', 'view.1'); bind('continuous', 'continuous');
+  bind('viewtheta', 'view.0'); bind('viewphi', 'view.1'); bind('continuous', 'continuous'); bind('tiles', 'tiles');
   const live = panels.filter((p) => !p.error);
   const f = live.map((p) => features(p.exp.glsl));
   $('lodrow').hidden = !f.some((x) => x.lod);

@@ -47,6 +47,8 @@ vec3 btfv_shade(vec2 uv, vec3 p, vec3 t, vec3 b, vec3 n, vec3 wv_world, float lo
   if (wl.z <= 0.0) return vec3(0.0);
   return e * btfv_eval(uv, wl, wv, lod);
 }
+// Texel q wrapped into the texture (the texture tiles). GLSL's % is undefined for negative operands.
+ivec2 btfv_wrap(ivec2 q, ivec2 size) { return q - size * ivec2(floor(vec2(q) / vec2(size))); }
 vec4 btfv_display(vec3 c) {
   c *= exp2(u_exposure);
   if (u_tonemap == 1) {
@@ -74,6 +76,43 @@ void main() {
 }
 `;
 
+// Sphere mode: `btfc render --shape sphere` (codecs/render.cpp) pixel for pixel: a unit sphere
+// seen orthographically from u_view, the texture's axis the screen's up (u = phi / pi * tiles +
+// 1/2, v = theta / pi * tiles, in texels), t = d/dphi, texels blended bilinearly (4 btf_eval).
+const RSPHERE_MAIN = /* glsl */ `
+uniform vec3 u_view;
+uniform ivec2 u_size;
+uniform int u_canvas, u_tiles;
+const float BTFV_PI = 3.14159265358979;  // prefixed: exported shaders define their own PI
+void main() {
+  vec3 v = normalize(u_view);
+  vec3 hint = abs(v.z) > 0.99 ? vec3(0, 1, 0) : vec3(0, 0, 1);
+  vec3 right = normalize(cross(hint, v)), up = cross(v, right);
+  ivec2 px = ivec2(gl_FragCoord.xy);
+  float x = (float(px.x) + 0.5) / float(u_canvas) * 2.0 - 1.0;
+  float y = 1.0 - (float(u_canvas - 1 - px.y) + 0.5) / float(u_canvas) * 2.0;   // canvas rows go up
+  float r2 = x * x + y * y;
+  vec3 c = vec3(0.0);
+  vec3 tt = vec3(0.0);
+  vec3 n = normalize(x * right + y * up + sqrt(max(1.0 - r2, 0.0)) * v);
+  if (r2 < 1.0) tt = cross(up, n);
+  if (dot(tt, tt) >= 1e-18) {
+    vec3 t = normalize(tt), b = cross(n, t);
+    float th = acos(clamp(dot(n, up), -1.0, 1.0)), ph = atan(dot(n, right), dot(n, v));
+    vec2 f = vec2((ph / BTFV_PI * float(u_tiles) + 0.5) * float(u_size.x), th / BTFV_PI * float(u_tiles) * float(u_size.y)) - 0.5;
+    vec2 f0 = floor(f), a = f - f0;
+    for (int dy = 0; dy < 2; ++dy)
+      for (int dx = 0; dx < 2; ++dx) {
+        float w = (dx == 1 ? a.x : 1.0 - a.x) * (dy == 1 ? a.y : 1.0 - a.y);
+        if (w == 0.0) continue;
+        ivec2 q = btfv_wrap(ivec2(f0) + ivec2(dx, dy), u_size);
+        c += w * btfv_shade((vec2(q) + 0.5) / vec2(u_size), n, t, b, n, v, u_lod);
+      }
+  }
+  btfv_color = btfv_display(c);
+}
+`;
+
 const MESH_MAIN = /* glsl */ `
 uniform vec3 u_camera;
 uniform ivec2 u_size;
@@ -81,7 +120,7 @@ uniform bool u_bilinear;
 in vec3 v_pos, v_n, v_t;
 in vec2 v_uv;
 vec3 at_texel(ivec2 q, vec3 t, vec3 b, vec3 n, vec3 wv, float lod) {
-  q = (q % u_size + u_size) % u_size;   // the texture tiles
+  q = btfv_wrap(q, u_size);
   return btfv_shade((vec2(q) + 0.5) / vec2(u_size), v_pos, t, b, n, wv, lod);
 }
 void main() {
@@ -131,8 +170,10 @@ export function features(glsl) {
   return { lod: /\bbtf_eval_lod\s*\(/.test(glsl), relit: /\bbtf_relit\s*\(/.test(glsl) };
 }
 
-// One material per (export, flat | mesh); `uniforms` are shared, so one settings change reaches both.
-export function makeMaterial(exp, flat, uniforms) {
+// One material per (export, kind: 'flat' | 'rsphere' | 'mesh'); `uniforms` are shared, so one
+// settings change reaches all.
+export function makeMaterial(exp, kind, uniforms) {
+  const flat = kind !== 'mesh';   // flat and rsphere draw one full-canvas quad
   const f = features(exp.glsl);
   const body = exp.glsl.replace(/^\s*#version[^\n]*\n/, '');  // three puts "#version 300 es" first
   const defines = { BTFC_NO_MAIN: '' };
@@ -146,7 +187,7 @@ export function makeMaterial(exp, flat, uniforms) {
     defines,
     uniforms: u,
     vertexShader: flat ? FLAT_VERT : MESH_VERT,
-    fragmentShader: body + SHADE + (flat ? FLAT_MAIN : MESH_MAIN),
+    fragmentShader: body + SHADE + { flat: FLAT_MAIN, rsphere: RSPHERE_MAIN, mesh: MESH_MAIN }[kind],
     side: flat ? THREE.FrontSide : THREE.DoubleSide,
   });
 }

@@ -2,7 +2,8 @@
 // in viewer/package-lock.json), each page served by `btfc view` itself.
 //   node browser_test.mjs VIEWER_DIR WORK CONFIG.json
 // CONFIG: { btfc, chromium, query (the fixed camera / light, as URL parameters), cases: [{name,
-// dir, reference (btfc render PNG of the same model, camera, light), min (dB, default 35)}], wrong_reference, broken:
+// dir, reference (btfc render PNG of the same model, camera, light), min (dB, default 35), query
+// (the viewer mode, default flat), mask ('disc': the sphere's pixels), wrong: {reference, what}}], broken:
 // [{name, dir, expect (text the page must show)}], shots: [{name, dir, query}] }.
 // Checks: every codec's flat-mode screenshot against `btfc render` (PSNR >= 35 dB on the
 // material's pixels, sRGB 8-bit as both write them); a render under another light must fail that
@@ -51,11 +52,15 @@ function readPng(file) {
 
 // PSNR (dB, peak 255) over the RGB of the material's pixels: in flat mode every pixel is a texel
 // of the sample; pixels black in both images (unlit texels) are material too and count.
-function psnr(a, b) {
+// mask 'disc': only the pixels btfc render's sphere covers (pixel centre inside the unit disc).
+function psnr(a, b, mask) {
   if (a.w !== b.w || a.h !== b.h) throw new Error(`sizes differ: ${a.w}x${a.h} vs ${b.w}x${b.h}`);
   let se = 0, n = 0;
-  for (let i = 0; i < a.w * a.h; ++i)
+  for (let i = 0; i < a.w * a.h; ++i) {
+    const x = ((i % a.w) + 0.5) / a.w * 2 - 1, y = 1 - (Math.floor(i / a.w) + 0.5) / a.h * 2;
+    if (mask === 'disc' && x * x + y * y >= 1) continue;
     for (let c = 0; c < 3; ++c, ++n) se += (a.px[i * a.ch + c] - b.px[i * b.ch + c]) ** 2;
+  }
   return se === 0 ? Infinity : 10 * Math.log10((255 * 255 * n) / se);
 }
 
@@ -104,18 +109,18 @@ const browser = await puppeteer.launch({
 });
 try {
   for (const c of cfg.cases) {
-    const { page, srv } = await openPage(browser, [c.dir], `${cfg.query}&mode=flat&zoom=1`);
+    const { page, srv } = await openPage(browser, [c.dir], `${cfg.query}&${c.query || 'mode=flat&zoom=1'}`);
     const state = await page.evaluate(() => document.body.dataset.state);
     if (state !== 'ready') {
       report(false, `${c.name}: the page did not load: ${await page.evaluate(() => window.btfcViewer.errors().join('; '))}`);
     } else {
       const shot = await shootCanvas(page, path.join(work, `${c.name.replace(/\W+/g, "_")}.viewer.png`));
       const ref = readPng(c.reference);
-      const db = psnr(shot, ref), min = c.min ?? PSNR_MIN;
+      const db = psnr(shot, ref, c.mask), min = c.min ?? PSNR_MIN;
       report(db >= min, `${c.name}: viewer vs btfc render PSNR ${db.toFixed(2)} dB (>= ${min}), ${shot.w}x${shot.h} pixels`);
-      if (c.name === cfg.cases[0].name && cfg.wrong_reference) {
-        const wrong = psnr(shot, readPng(cfg.wrong_reference));
-        report(wrong < PSNR_MIN, `${c.name}: against a render under another light ${wrong.toFixed(2)} dB (< ${PSNR_MIN}: the check can fail)`);
+      if (c.wrong) {  // the comparison must be able to fail: a render of another scene
+        const wrong = psnr(shot, readPng(c.wrong.reference), c.mask);
+        report(wrong < min, `${c.name}: against a render ${c.wrong.what} ${wrong.toFixed(2)} dB (< ${min}: the check can fail)`);
       }
     }
     srv.stop();
