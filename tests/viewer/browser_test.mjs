@@ -6,9 +6,10 @@
 // (the viewer mode, default flat), mask ('disc': the sphere's pixels), wrong: {reference, what}}], broken:
 // [{name, dir, expect (text the page must show)}], shots: [{name, dir, query}] }.
 // Checks: every codec's flat-mode screenshot against `btfc render` (PSNR >= 35 dB on the
-// material's pixels, sRGB 8-bit as both write them); a render under another light must fail that
-// bound (the comparison can fail); broken exports show their error on the page; two exports load
-// side by side. Prints one line per check and "N passed, N failed".
+// material's pixels, sRGB 8-bit as both write them), and per case bounds (512 x 512 direction
+// maps, the rsphere mode); renders of another scene must fail the bound (the comparison can
+// fail); broken exports show their error on the page; two exports load side by side; shift-drag
+// moves the light; shots draw the shape. Prints one line per check and "N passed, N failed".
 import { spawn } from 'node:child_process';
 import fs from 'node:fs';
 import { createRequire } from 'node:module';

@@ -3,11 +3,14 @@
 #  1. installs the viewer's pinned npm packages into VIEWER_DIR (viewer/install.sh);
 #  2. crops the textile (DATA_DIR/textile_lurex_utia64) to its central 32 x 32 texels and
 #     compresses it with every codec at its default spec (the whole 64 x 64 textile takes 160 s
-#     to compress here, mlvq 100 s of it; the crop about 30 s), exports each, and renders it with
-#     `btfc render` (flat sample, fixed view and point light, reinhard tone map);
-#  3. makes broken exports (a texture missing, a manifest that is not JSON);
-#  4. runs browser_test.mjs: the viewer's screenshots against the renders, the broken exports'
-#     messages on the page, two exports side by side.
+#     to compress here, mlvq 100 s of it; the crop about 30 s), two codecs at a time, exports
+#     each (default and 512 x 512 direction maps), and renders it with `btfc render` (flat sample
+#     and sphere, fixed view and point light, reinhard tone map);
+#  3. makes broken exports (a texture missing, a manifest that is not JSON, a texture cut short);
+#  4. runs browser_test.mjs: the viewer's flat and sphere screenshots against the renders (and
+#     against renders of another scene, which must fail), the broken exports' messages on the
+#     page, two exports side by side, the light dragged, a perspective sphere drawn.
+# Before any of that, `btfc view`'s refusals (no manifest.json, no viewer installed) are checked.
 # Exit 77 (ctest: skipped, with the reason) without chromium, node or npm, or when the npm
 # install fails. Usage: BTFC=... CROP=... DATA_DIR=... SOURCE_DIR=... VIEWER_DIR=... browser_test.sh WORK
 set -uo pipefail
