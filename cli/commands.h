@@ -138,5 +138,7 @@ bool bench_streamed(const Global& g, const BenchArgs& a, BtfInput& input, int& c
 void add_bsvtf_commands(CLI::App& app, const Global& g, int& code);
 // `export` (cli/export_commands.cpp) likewise: its arguments live in that file.
 void add_export_commands(CLI::App& app, const Global& g, int& code);
+// `view` (cli/view_command.cpp): serves the web viewer (viewer/) for export directories.
+void add_view_command(CLI::App& app, const Global& g, int& code);
 
 }  // namespace btfc::cli

@@ -191,6 +191,7 @@ int main(int argc, char** argv) {
 
   add_export_commands(app, g, code);
   add_bsvtf_commands(app, g, code);
+  add_view_command(app, g, code);
 
   std::string help_cmd, doc_kind;
   auto* help = app.add_subcommand("help", "show the help of a command (btfc help COMMAND) or of btfc");

@@ -2,7 +2,8 @@
 # Installs the Debian packages btfc needs. Idempotent: does nothing when all are present.
 # Package list: ../shared/spec/toolchain.md section 1 (+ nlohmann-json, scikit-image for the
 # SSIM reference script, GoogleTest / Google Benchmark; headless EGL + GLES on Mesa's llvmpipe and
-# glslang for the export checks, toolchain.md section 7; pybind11 and pytest for the Python module).
+# glslang for the export checks, toolchain.md section 7; pybind11 and pytest for the Python module;
+# cpp-httplib for `btfc view` and chromium for the web viewer's browser test, issue 21).
 set -euo pipefail
 PACKAGES=(
   build-essential cmake
@@ -14,6 +15,7 @@ PACKAGES=(
   pybind11-dev python3-dev python3-pytest
   libopenmpi-dev openmpi-bin
   libegl-mesa0 libgl1-mesa-dri libegl-dev libgles-dev glslang-tools
+  libcpp-httplib-dev chromium
 )
 missing=()
 for p in "${PACKAGES[@]}"; do
