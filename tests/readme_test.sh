@@ -14,6 +14,12 @@
 # Usage: BTFC=path/to/btfc SOURCE_DIR=... readme_test.sh WORKDIR
 set -uo pipefail
 W=$1
+# Once per suite run (3 minutes on 2 cores, the suite's longest test): the README's lines are
+# about usage; the CPU pass (BTFC_FORCE_CPU=1) would run the same lines on the CPU path, which the
+# codec and CLI tests of that pass already cover.
+if [ "${BTFC_FORCE_CPU:-0}" = 1 ]; then
+  echo "SKIP: the README's lines run in the suite's first pass only (BTFC_FORCE_CPU=1 here)"; exit 77
+fi
 SRC=$(realpath "$SOURCE_DIR")
 BUILD=$(dirname "$(realpath "$BTFC")")
 rm -rf "$W" && mkdir -p "$W"
