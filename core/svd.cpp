@@ -84,8 +84,9 @@ uint64_t fingerprint(ConstMapF& B) {
 // double, eigenvalues descending.
 void gram_eigen(ConstMapF& B, bool rows_small, const SvdOptions& opt, Eigen::VectorXd& lambda, MatrixXd& E) {
   const Index n = B.cols(), k = rows_small ? B.rows() : n;
-  // B B^T is accumulated over column blocks so no double copy of B exists; B^T B is only chosen
-  // when n < m (few texels), where the copy is small.
+  // B B^T is accumulated over column blocks so no double copy of B exists. B^T B (n < m: fewer
+  // texels than rows) uses one double copy of B: 2x the input, 645 MB for the 64 x 64 textile,
+  // whose ranks above 1/8 of its 4096 texels now take this path.
   MatrixXd G = MatrixXd::Zero(k, k);
   const Index block = 4096;
   // One step per Gram block, one for the eigendecomposition, one for the projection.
