@@ -3,6 +3,8 @@
 // computed it.
 #include "core/fixed_product.h"
 
+#include "core/cpu_dispatch.h"
+
 #include <algorithm>
 #include <cstdint>
 
@@ -12,7 +14,10 @@ namespace {
 constexpr size_t kRows = 4, kCols = 32;
 
 // The full block: acc[t][j] += A(i0 + t, k) * BT(k, r0 + j) for k = 0..C-1.
-inline void block_full(const float* A, size_t C, size_t lda, const float* BT, size_t m, float* out, size_t ldo, bool accumulate) {
+// Dispatched by CPU (core/cpu_dispatch.h): the 32 columns are one AVX-512 or two AVX2 registers
+// per row. With -ffp-contract=off every clone computes the same bits. A block does C x 128
+// multiply-adds, so the indirect call costs nothing measurable.
+BTFC_CPU_CLONES void block_full(const float* A, size_t C, size_t lda, const float* BT, size_t m, float* out, size_t ldo, bool accumulate) {
   float acc[kRows][kCols];
   for (size_t t = 0; t < kRows; ++t)
     for (size_t j = 0; j < kCols; ++j) acc[t][j] = accumulate ? out[t * ldo + j] : 0.0f;
@@ -28,7 +33,7 @@ inline void block_full(const float* A, size_t C, size_t lda, const float* BT, si
 }
 
 // A ragged block (nr rows, nc columns): the same per-value arithmetic.
-void block_edge(const float* A, size_t nr, size_t nc, size_t C, size_t lda, const float* BT, size_t m, float* out, size_t ldo,
+BTFC_CPU_CLONES void block_edge(const float* A, size_t nr, size_t nc, size_t C, size_t lda, const float* BT, size_t m, float* out, size_t ldo,
                 bool accumulate) {
   float acc[kRows][kCols];
   for (size_t t = 0; t < nr; ++t)

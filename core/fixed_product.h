@@ -12,8 +12,9 @@
 // and did: a streamed decode differed from the whole one by one float ulp on another CPU's
 // kernels (issue 23).
 //
-// Speed: register-blocked 4 rows x 32 columns, vectorized over columns by the compiler, rows in
-// parallel (OpenMP). It is for decodes (C up to a few hundred), not for factorizations.
+// Speed: register-blocked 4 rows x 32 columns, vectorized over columns by the compiler (AVX-512 /
+// AVX2 / SSE2 chosen at run time in a portable build, core/cpu_dispatch.h), rows in parallel
+// (OpenMP). It is for decodes (C up to a few hundred), not for factorizations.
 #pragma once
 #include <cstddef>
 

@@ -19,6 +19,8 @@
 // so C1, C2 > 0 and constant or all-zero images never divide by zero (identical ones give 1).
 #include "core/metrics.h"
 
+#include "core/cpu_dispatch.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -175,7 +177,10 @@ double mean_ssim(const Btf& ref, const Btf& test, double fixed_L, double fallbac
 
 }  // namespace
 
-double ssim_gray(const float* a, const float* b, int w, int h, double L) {
+// Dispatched by CPU (core/cpu_dispatch.h): the v8d moments of vertical8 are one AVX-512 register,
+// two AVX2 or four SSE2 ones; the portable build's baseline clone alone made `btfc compare` 1.36x
+// slower (docs/benchmarks.md "Portable and native builds").
+BTFC_CPU_CLONES double ssim_gray(const float* a, const float* b, int w, int h, double L) {
   if (w <= 0 || h <= 0) return 1.0;
   if (!(L > 0) || !std::isfinite(L)) L = 1.0;
   const double c1 = (k_k1 * L) * (k_k1 * L), c2 = (k_k2 * L) * (k_k2 * L);

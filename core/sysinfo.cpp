@@ -1,5 +1,7 @@
 #include "core/sysinfo.h"
 
+#include "core/cpu_dispatch.h"
+
 #include <unistd.h>
 
 #include <cstdio>
@@ -50,7 +52,21 @@ std::string machine_summary() {
     std::snprintf(buf, sizeof buf, ", %.1f GiB", double(mem_kb) / (1024.0 * 1024.0));
     s << buf;
   }
+  s << ", loops " << cpu_dispatch_level();
   return s.str();
+}
+
+const char* cpu_dispatch_level() {
+#if BTFC_CPU_DISPATCH
+  // The same order as the ifunc resolver of BTFC_CPU_CLONES tries them.
+  if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512vl") &&
+      __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512cd"))
+    return "x86-64-v4 (AVX-512)";
+  if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") && __builtin_cpu_supports("bmi2")) return "x86-64-v3 (AVX2)";
+  return "x86-64 baseline";
+#else
+  return "as built (no run-time dispatch)";
+#endif
 }
 
 }  // namespace btfc

@@ -14,7 +14,8 @@ uint64_t peak_rss_bytes();
 uint64_t current_rss_bytes();
 bool reset_peak_rss();  // true when the high-water mark was reset
 
-// "Intel(R) Xeon(R) ... , 2 cores, 23.4 GiB" from /proc/cpuinfo, sysconf and /proc/meminfo.
+// "Intel(R) Xeon(R) ... , 2 cores, 23.4 GiB, loops x86-64-v3 (AVX2)" from /proc/cpuinfo, sysconf,
+// /proc/meminfo and the run-time dispatch of the hot loops (core/cpu_dispatch.h).
 std::string machine_summary();
 
 }  // namespace btfc

@@ -4,7 +4,9 @@
 #include <fcntl.h>
 #include <sys/mman.h>
 #include <unistd.h>
+#if defined(__x86_64__)
 #include <immintrin.h>
+#endif
 
 #include <Imath/half.h>
 #include <cmath>
@@ -16,10 +18,23 @@
 
 namespace btfc {
 
-float floats_to_half(const float* src, size_t n, float inv_scale, uint16_t* dst) {
-  float mx = 0;
+namespace {
+
+#if defined(__x86_64__) && defined(__GNUC__)
+#define BTFC_F16C_PATH 1
+// The F16C loops are compiled for AVX + F16C whatever the build's flags and run only where the
+// CPU has them (checked once), so a portable build (BTFC_NATIVE=OFF, core/cpu_dispatch.h) keeps
+// the hardware conversion: software half rounding is several times slower per value. Both paths
+// round to nearest even, so they give the same bits.
+bool cpu_has_f16c() {
+  static const bool yes = __builtin_cpu_supports("avx") && __builtin_cpu_supports("f16c");
+  return yes;
+}
+
+// Converts the first n - n % 8 values; returns how many. mx and nan as floats_to_half.
+__attribute__((target("avx,f16c"))) size_t to_half_f16c(const float* src, size_t n, float inv_scale, uint16_t* dst, float& mx,
+                                                        bool& nan) {
   size_t i = 0;
-#ifdef __F16C__
   __m256 vmax = _mm256_setzero_ps(), vnan = _mm256_setzero_ps();
   const __m256 vs = _mm256_set1_ps(inv_scale), sign = _mm256_set1_ps(-0.0f);
   for (; i + 8 <= n; i += 8) {
@@ -31,9 +46,34 @@ float floats_to_half(const float* src, size_t n, float inv_scale, uint16_t* dst)
   alignas(32) float lanes[8];
   _mm256_store_ps(lanes, vmax);
   for (float l : lanes) mx = std::max(mx, l);
-  bool nan = _mm256_movemask_ps(vnan) != 0;
-#else
+  nan = nan || _mm256_movemask_ps(vnan) != 0;
+  return i;
+}
+
+// Converts the first n - n % 8 values; returns how many. bad: nonzero if one was NaN / Inf.
+__attribute__((target("avx,f16c"))) size_t to_floats_f16c(const uint16_t* src, size_t n, float scale, float* dst, uint16_t& bad) {
+  size_t i = 0;
+  const __m256 vs = _mm256_set1_ps(scale);
+  const __m128i exp = _mm_set1_epi16(0x7c00);
+  __m128i vbad = _mm_setzero_si128();
+  for (; i + 8 <= n; i += 8) {
+    const __m128i h = _mm_loadu_si128(reinterpret_cast<const __m128i*>(src + i));
+    vbad = _mm_or_si128(vbad, _mm_cmpeq_epi16(_mm_and_si128(h, exp), exp));
+    _mm256_storeu_ps(dst + i, _mm256_mul_ps(_mm256_cvtph_ps(h), vs));
+  }
+  bad = uint16_t(bad | _mm_movemask_epi8(vbad));
+  return i;
+}
+#endif
+
+}  // namespace
+
+float floats_to_half(const float* src, size_t n, float inv_scale, uint16_t* dst) {
+  float mx = 0;
   bool nan = false;
+  size_t i = 0;
+#ifdef BTFC_F16C_PATH
+  if (cpu_has_f16c()) i = to_half_f16c(src, n, inv_scale, dst, mx, nan);
 #endif
   for (; i < n; ++i) {
     const float v = src[i] * inv_scale;
@@ -47,16 +87,8 @@ float floats_to_half(const float* src, size_t n, float inv_scale, uint16_t* dst)
 bool half_to_floats(const uint16_t* src, size_t n, float scale, float* dst) {
   size_t i = 0;
   uint16_t bad = 0;  // a half NaN / Inf has all exponent bits set
-#ifdef __F16C__
-  const __m256 vs = _mm256_set1_ps(scale);
-  const __m128i exp = _mm_set1_epi16(0x7c00);
-  __m128i vbad = _mm_setzero_si128();
-  for (; i + 8 <= n; i += 8) {
-    const __m128i h = _mm_loadu_si128(reinterpret_cast<const __m128i*>(src + i));
-    vbad = _mm_or_si128(vbad, _mm_cmpeq_epi16(_mm_and_si128(h, exp), exp));
-    _mm256_storeu_ps(dst + i, _mm256_mul_ps(_mm256_cvtph_ps(h), vs));
-  }
-  bad = uint16_t(_mm_movemask_epi8(vbad));
+#ifdef BTFC_F16C_PATH
+  if (cpu_has_f16c()) i = to_floats_f16c(src, n, scale, dst, bad);
 #endif
   for (; i < n; ++i) {
     bad |= uint16_t((src[i] & 0x7c00) == 0x7c00);

@@ -105,8 +105,9 @@ class BdiChunks {
   float m_scale = 1;
 };
 
-// Half <-> float for n values (F16C when compiled for it). to_half returns the largest |x|;
-// to_floats returns false when a value is a half NaN or Inf (converted all the same).
+// Half <-> float for n values (F16C where the CPU has it, checked at run time). to_half returns
+// the largest |x|; to_floats returns false when a value is a half NaN or Inf (converted all the
+// same).
 float floats_to_half(const float* src, size_t n, float inv_scale, uint16_t* dst);
 bool half_to_floats(const uint16_t* src, size_t n, float scale, float* dst);
 
