@@ -18,6 +18,7 @@
 #include "formats/btf_io.h"
 #include "formats/reader.h"
 #include "formats/preview.h"
+#include "codecs/preview_panel.h"
 
 namespace btfc::cli {
 namespace {
@@ -134,7 +135,13 @@ int cmd_bench(const Global& g, const BenchArgs& a) {
       for (size_t k = 0; k < b.renders.size(); ++k) {
         const std::string path = a.renders_dir + "/" + safe_name(label + "-" + std::to_string(i) + "-" + specs[i]) +
                                  (k == 0 ? "-flat.png" : "-sphere.png");
-        Status s = write_rgb_image(path, side_by_side(refs[k], b.renders[k], 5.0));
+        // Labelled: which run, which tile is which, and what the error colours mean.
+        // The spec as given (the canonical one lists every default and is cut off at the panel's width).
+        char numbers[96];
+        std::snprintf(numbers, sizeof numbers, "PSNR %.2f dB  render SSIM %.4f  ratio %.1f", b.metrics.psnr, b.render_ssim, b.ratio);
+        auto panel = preview_panel(refs[k], b.renders[k], 5.0, label + "  " + b.spec_given + (k == 0 ? "  flat" : "  sphere") + "\n" + numbers);
+        if (!panel.ok()) return fail(g, panel.status().with_context(path));
+        Status s = write_rgb_image(path, panel->image);
         if (!s.ok()) return fail(g, s);
       }
     b.model.reset();  // models can be large; the numbers are kept

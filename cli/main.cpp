@@ -161,7 +161,7 @@ int main(int argc, char** argv) {
   bench->add_option("--csv", ba.csv, "write the runs as CSV to this file");
   bench->add_flag("--append", ba.append, "append to the --csv file instead of replacing it");
   bench->add_option("--json-out", ba.json_out, "write the JSON report to this file");
-  bench->add_option("--renders", ba.renders_dir, "write side-by-side PNGs (original | decoded | error x5) per run here");
+  bench->add_option("--renders", ba.renders_dir, "write a labelled PNG panel per run and scene here: original | decoded | error x5 with its colour scale and range");
   bench->add_flag("--pareto", ba.pareto, "list which run wins at each byte budget (PSNR and SSIM fronts)");
   bench->add_flag("--no-renders", ba.no_renders, "skip the rendered-image SSIM");
   bench->add_option("--throughput-queries", ba.throughput_queries, "random interpolated evaluations per timing round (0 = skip)");

@@ -110,7 +110,8 @@ void add_view_command(CLI::App& app, const Global& g, int& code) {
   v->add_option("dirs", a.dirs, "export directories written by btfc export (one, or two to compare)")->required()->expected(1, 2);
   v->add_option("--port", a.port, "TCP port (0: any free port)")->check(CLI::Range(0, 65535));
   v->add_option("--host", a.host, "address to listen on (the default serves this machine only)");
-  v->add_option("--viewer", a.viewer, "viewer directory (viewer/install.sh DIR); default: $BTFC_VIEWER_DIR, then build/viewer beside the binary");
+  v->add_option("--viewer", a.viewer, "viewer directory (viewer/install.sh DIR); default: $BTFC_VIEWER_DIR, then viewer/ beside the binary (the build tree), "
+                                "then ../share/btfc/viewer (cmake --install)");
   v->callback([&] { code = cmd_view(g, a); });
 }
 

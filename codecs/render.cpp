@@ -8,6 +8,7 @@
 #include "core/sh.h"  // hemisphere_cell_weights: the same quadrature lpca's SH projection uses
 #include "core/interp.h"
 #include "core/metrics.h"
+#include "codecs/preview_panel.h"  // heat_color: one ramp for side_by_side and the panels
 
 namespace btfc {
 namespace {
@@ -271,9 +272,7 @@ RgbImage side_by_side(const RgbImage& reference, const RgbImage& test, double ma
         err = std::max(err, double(std::abs(test.rgb[k + size_t(c)] - reference.rgb[k + size_t(c)])));
       }
       // Heat map: black -> red -> yellow -> white as the magnified error grows to 1.
-      const double e = std::clamp(err / white * magnify, 0.0, 1.0) * 3;
-      float* p = out.rgb.data() + (size_t(j) * size_t(out.width) + size_t(2 * (w + gap) + i)) * 3;
-      p[0] = float(std::min(e, 1.0)), p[1] = float(std::clamp(e - 1, 0.0, 1.0)), p[2] = float(std::clamp(e - 2, 0.0, 1.0));
+      heat_color(err / white * magnify, out.rgb.data() + (size_t(j) * size_t(out.width) + size_t(2 * (w + gap) + i)) * 3);
     }
   return out;
 }

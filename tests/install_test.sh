@@ -4,10 +4,12 @@
 #      man page, completions, CMake package, Python module;
 #   2. tests/consumer (copied out of the tree) configured with find_package(btfc) against the
 #      prefix only, built and run; its numbers equal the installed CLI's on the same input;
-#   3. the installed Python module imported from the prefix in another directory, its numbers
+#   3. the web viewer installed under share/btfc/viewer and found there by the installed btfc view
+#      (issue 21), which serves the page and three.js when they were installed into the build tree;
+#   4. the installed Python module imported from the prefix in another directory, its numbers
 #      equal the CLI's.
-# Env: BUILD_DIR, SOURCE_DIR, CMAKE, CXX, PYTHON (empty: no Python module built, step 3 skipped
-# with a message).   Usage: install_test.sh WORK_DIR
+# Env: BUILD_DIR, SOURCE_DIR, CMAKE, CXX, PYTHON (empty: no Python module built, step 4 skipped
+# with a message; curl fetches the viewer's files).   Usage: install_test.sh WORK_DIR
 set -uo pipefail
 W=$1
 # Once per suite run: what is installed and how a consumer builds does not depend on the device
@@ -68,6 +70,44 @@ ok = ok and all(abs(a - b) <= 1e-5 * max(1e-6, abs(b)) for a, b in zip(c["eval"]
 print(c, cli["psnr"], same["rmse"], ev)
 sys.exit(0 if ok else 1)
 PY
+fi
+
+# The web viewer under share/btfc/viewer, found there by the installed `btfc view` (not the build
+# tree's: the prefix's bin/ has no viewer/ beside it, and BTFC_VIEWER_DIR is unset). With three.js
+# installed into the build tree (viewer/install.sh, run by the browser test), the installed server
+# must serve the page and every module it imports; without it, btfc view must name the installed
+# viewer directory and say the npm packages are missing.
+V="$P/share/btfc/viewer"
+for f in index.html main.js export.js ktx2.js material.js shapes.js style.css; do
+  cmp -s "$SOURCE_DIR/viewer/$f" "$V/$f" || { echo "FAIL viewer-installed: $V/$f"; fails=$((fails + 1)); vmissing=1; }
+done
+[ -z "${vmissing:-}" ] && echo "ok   viewer-installed"
+if [ -f "$BUILD_DIR/viewer/node_modules/three/build/three.module.js" ] && ! command -v curl >/dev/null; then
+  echo "SKIP viewer-served-from-prefix: curl not found (apt-get install curl)"
+elif [ -f "$BUILD_DIR/viewer/node_modules/three/build/three.module.js" ]; then
+  env -u BTFC_VIEWER_DIR "$BTFC" --json view "$W/c/gpu" --port 0 > "$W/view.out" 2> "$W/view.err" &
+  vpid=$!
+  for _ in $(seq 100); do grep -q '"url"' "$W/view.out" && break; sleep 0.1; done
+  url=$(sed -n 's/.*"url":"\(http[^"?]*\)[^"]*".*/\1/p' "$W/view.out")
+  served=$(sed -n 's/.*"viewer":"\([^"]*\)".*/\1/p' "$W/view.out")
+  vok=1
+  [ "$served" = "$V" ] || { echo "FAIL viewer-found: serves '$served', not $V: $(cat "$W/view.out" "$W/view.err")"; vok=0; }
+  # The page, the modules its import map and its scripts load, and the export's manifest.
+  for f in index.html main.js node_modules/three/build/three.module.js node_modules/three/build/three.core.js \
+           node_modules/three/examples/jsm/controls/OrbitControls.js a/manifest.json; do
+    code=$(curl -s -o "$W/fetched" -w '%{http_code}' "$url$f")
+    [ "$code" = 200 ] && [ -s "$W/fetched" ] || { echo "FAIL viewer-served: $url$f: HTTP $code"; vok=0; }
+  done
+  cmp -s "$W/fetched" "$W/c/gpu/manifest.json" || { echo "FAIL viewer-served: a/manifest.json is not the export's"; vok=0; }
+  kill "$vpid" 2>/dev/null; wait "$vpid" 2>/dev/null
+  [ $vok = 1 ] && echo "ok   viewer-served-from-prefix ($served at $url)" || fails=$((fails + 1))
+else
+  out=$(env -u BTFC_VIEWER_DIR "$BTFC" view "$W/c/gpu" --port 0 2>&1); rc=$?
+  if [ $rc -eq 1 ] && grep -qF "$V: the viewer's npm packages are not installed" <<<"$out"; then
+    echo "ok   viewer-found-in-prefix (three.js not installed into the build tree, so not into the prefix: $out)"
+  else
+    echo "FAIL viewer-found-in-prefix: exit $rc: $out"; fails=$((fails + 1))
+  fi
 fi
 
 # The Python module from the prefix, in a directory outside the source and build trees.

@@ -47,7 +47,24 @@ function makeTexture(t, k, sampler) {
   return tex;
 }
 
-// Returns { url, manifest, glsl, textures: {name: THREE texture}, info: [...] } or throws.
+// One texture per level of a mip chain (level 0 = the texture itself), each holding that level
+// as its only level. The exported shaders read level 0 with texelFetch, so showing level l is
+// binding level l's texture in place of the chain and scaling uv (setMipLevel). (Moving one
+// chain texture's TEXTURE_BASE_LEVEL behind three.js's back read wrong texels in the browser
+// test, half the coordinate range black, although base level + texelFetch works in plain WebGL2
+// on the same SwiftShader: separate textures keep three's texture state its own.)
+function makeLevels(t, k, sampler) {
+  const levels = [makeTexture(t, k, sampler)];
+  for (let i = 1; i < k.mips.length; ++i) {
+    const m = k.mips[i];
+    levels.push(makeTexture(t, { ...k, width: m.width, height: m.height, data: m.data, mips: [m] }, sampler));
+  }
+  levels[0].userData.levels = levels.length;
+  return levels;
+}
+
+// Returns { url, manifest, glsl, textures: {name: THREE texture (level 0)}, mips: {name: [texture per
+// level]}, bound: {name: the uniform the materials share} } or throws.
 export async function loadExport(url) {
   if (!url.endsWith('/')) url += '/';
   const mr = await fetchOk(url + 'manifest.json', 'manifest.json');
@@ -66,20 +83,60 @@ export async function loadExport(url) {
   const glsl = await (await fetchOk(url + shaderFile, shaderFile)).text();
   if (!/^\s*#version 300 es/.test(glsl)) throw new Error(`${shaderFile}: does not start with "#version 300 es"`);
   const samplers = samplerTypes(glsl);
-  const textures = {};
+  const textures = {}, mips = {};
   // Fetched in parallel: an export has up to ~20 files and the page waits for all of them.
   await Promise.all(manifest.textures.map(async (t) => {
     const file = t.file || `${t.name}.ktx2`;
     const k = parseKtx2(await (await fetchOk(url + file, `texture ${t.name} (${file})`)).arrayBuffer(), file);
     // The manifest and the file must agree: a stale or mixed-up export would render nonsense.
-    if (k.format.name !== t.format || k.width !== t.width || k.height !== t.height || k.layers !== t.layers)
-      throw new Error(`${file}: the file is ${k.format.name} ${k.width} x ${k.height} x ${k.layers} layers, ` +
-        `manifest.json says ${t.format} ${t.width} x ${t.height} x ${t.layers}`);
+    if (k.format.name !== t.format || k.width !== t.width || k.height !== t.height || k.layers !== t.layers ||
+        k.levels !== (t.levels ?? 1))
+      throw new Error(`${file}: the file is ${k.format.name} ${k.width} x ${k.height} x ${k.layers} layers x ${k.levels} levels, ` +
+        `manifest.json says ${t.format} ${t.width} x ${t.height} x ${t.layers} x ${t.levels ?? 1}`);
     const sampler = samplers[t.name];
     if (!sampler) throw new Error(`${shaderFile}: declares no sampler u_${t.name} for texture ${t.name}`);
     if (/^[iu]/.test(sampler) !== Boolean(k.format.integer))
       throw new Error(`${file}: ${k.format.name} cannot be read by the shader's ${sampler} u_${t.name}`);
-    textures[t.name] = makeTexture(t, k, sampler);
+    const levels = makeLevels(t, k, sampler);
+    textures[t.name] = levels[0];
+    mips[t.name] = levels;
   }));
-  return { url, manifest, glsl, textures };
+  // The uniforms the materials share: setMipLevel swaps a chain's level in for all of them.
+  const bound = {};
+  for (const [name, tex] of Object.entries(textures)) bound[name] = { value: tex };
+  return { url, manifest, glsl, textures, mips, bound };
+}
+
+// Puts every level of every texture on the GPU now (not at the first draw that binds it), so a
+// level-of-detail change does not stall on an upload. Returns the levels each texture has, by name.
+export function uploadMips(renderer, exp) {
+  const levels = {};
+  for (const [name, list] of Object.entries(exp.mips)) {
+    for (const tex of list) renderer.initTexture(tex);
+    levels[name] = list.length;
+  }
+  return levels;
+}
+
+// Shows mip level `level` (clamped to each chain) of every chain of the BTF's size, the textures
+// btf_eval indexes by uv: binds that level's texture and returns the uv scale (that level's
+// size / SIZE) under which the export's btf_eval, unchanged, addresses the level's texels.
+export function setMipLevel(exp, level) {
+  const btf = exp.manifest.btf;
+  let scale = [1, 1];
+  for (const [name, list] of Object.entries(exp.mips)) {
+    if (list.length < 2 || list[0].image.width !== btf.width || list[0].image.height !== btf.height) continue;
+    const l = Math.min(level, list.length - 1);
+    exp.bound[name].value = list[l];
+    scale = [list[l].image.width / btf.width, list[l].image.height / btf.height];
+  }
+  return scale;
+}
+
+// Levels of detail an export's mip chains offer: the chains' length when every texture of the
+// BTF's size has one (they are the ones btf_eval indexes by uv), else 1.
+export function mipLevels(exp) {
+  const btf = exp.manifest.btf;
+  const own = Object.values(exp.mips).filter((l) => l[0].image.width === btf.width && l[0].image.height === btf.height);
+  return own.length && own.every((l) => l.length > 1) ? Math.min(...own.map((l) => l.length)) : 1;
 }

@@ -26,8 +26,10 @@ const FORMATS = {
 
 const MAGIC = [0xab, 0x4b, 0x54, 0x58, 0x20, 0x32, 0x30, 0xbb, 0x0d, 0x0a, 0x1a, 0x0a];
 
-// Parses `buf` (ArrayBuffer); `what` names the file in errors. Returns level 0 only: every
-// exported shader reads level 0 with texelFetch (the fmf mip chain is for renderers that filter).
+// Parses `buf` (ArrayBuffer); `what` names the file in errors. Returns every mip level (`mips`,
+// level i of max(1, width >> i) x max(1, height >> i) x layers texels; `data` = level 0): the
+// exported shaders read level 0 with texelFetch, and the viewer shows the coarser levels of a
+// chain (fmf's eigen-textures) as its level of detail by moving the texture's base level.
 export function parseKtx2(buf, what) {
   const fail = (msg) => { throw new Error(`${what}: ${msg}`); };
   if (buf.byteLength < 80) fail(`truncated (${buf.byteLength} bytes, a KTX2 header is 80)`);
@@ -58,13 +60,17 @@ export function parseKtx2(buf, what) {
     if (z > 0) kv[s.slice(0, z)] = s.slice(z + 1).replace(/\0$/, '');
     p += 4 + n + ((4 - (n % 4)) % 4);
   }
-  const off = u64(80), len = u64(88);
   const nLayers = Math.max(1, layers);
-  const expect = width * height * nLayers * f.channels * f.bytes;
-  if (len !== expect) fail(`level 0 holds ${len} bytes, ${width} x ${height} x ${nLayers} ${f.name} needs ${expect}`);
-  if (off + len > buf.byteLength) fail(`truncated: level 0 ends at byte ${off + len}, the file has ${buf.byteLength}`);
-  const bytes = buf.slice(off, off + len);  // a copy: aligned for the typed array below
   const Typed = f.type === 'FLOAT' ? Float32Array : f.type === 'UNSIGNED_INT' ? Uint32Array
     : f.bytes === 2 ? Uint16Array : Uint8Array;
-  return { vkFormat, format: f, width, height, layers, levels, kv, data: new Typed(bytes) };
+  const mips = [];
+  for (let i = 0; i < levels; ++i) {
+    const off = u64(80 + 24 * i), len = u64(88 + 24 * i);
+    const w = Math.max(1, width >> i), h = Math.max(1, height >> i);
+    const expect = w * h * nLayers * f.channels * f.bytes;
+    if (len !== expect) fail(`level ${i} holds ${len} bytes, ${w} x ${h} x ${nLayers} ${f.name} needs ${expect}`);
+    if (off + len > buf.byteLength) fail(`truncated: level ${i} ends at byte ${off + len}, the file has ${buf.byteLength}`);
+    mips.push({ width: w, height: h, data: new Typed(buf.slice(off, off + len)) });  // a copy: aligned for the typed array
+  }
+  return { vkFormat, format: f, width, height, layers, levels, kv, mips, data: mips[0].data };
 }

@@ -3,7 +3,7 @@
 // (tests/viewer/browser_test.mjs) drives it through window.btfcViewer.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
-import { loadExport } from './export.js';
+import { loadExport, mipLevels, setMipLevel, uploadMips } from './export.js';
 import { features, makeMaterial } from './material.js';
 import { makeShape } from './shapes.js';
 
@@ -59,6 +59,8 @@ function describe(exp) {
     ['codec', m.codec], ['settings', m.spec], ['BTF', `${m.btf.width} x ${m.btf.height} texels, ${m.btf.lights.length} lights x ${m.btf.views.length} views`],
     ['texture bytes', `${kb(b.textures)} in ${m.textures.length} KTX2 files`], ['model payload', kb(b.model_payload)],
   ];
+  const chains = Object.entries(exp.textures).filter(([, t]) => t.userData.levels > 1).map(([n, t]) => `${n}: ${t.userData.levels} mip levels`);
+  if (chains.length) rows.push(['level of detail', chains.join(', ')]);
   if (m.warnings && m.warnings.length) rows.push(['warnings', m.warnings.join('; ')]);
   return rows.map(([k, v]) => `<tr><th>${k}</th><td>${String(v).replace(/[<&]/g, (c) => `&#${c.charCodeAt(0)};`)}</td></tr>`).join('');
 }
@@ -78,6 +80,11 @@ async function openPanel(url, el) {
       const log = gl.getShaderInfoLog(fs) || gl.getShaderInfoLog(vs) || gl.getProgramInfoLog(prog);
       p.error = `btf.frag does not compile with the viewer's main(): ${log}`;
     };
+    // Every mip level on the GPU; a codec whose chains cover its texel data (fmf) gets their
+    // levels as its level of detail (lpyr has its own, in btf_eval_lod).
+    p.levels = uploadMips(p.renderer, p.exp);
+    p.mipLevels = features(p.exp.glsl).lod ? 1 : mipLevels(p.exp);
+    p.exp.mipUv = { value: new THREE.Vector2(1, 1) };
     p.mats = { flat: makeMaterial(p.exp, 'flat', uniforms), rsphere: makeMaterial(p.exp, 'rsphere', uniforms),
       mesh: makeMaterial(p.exp, 'mesh', uniforms) };
     p.scene = new THREE.Scene();
@@ -133,6 +140,10 @@ function apply() {
         p.mesh.userData.shape = `${S.mode}:${S.repeat}`;
         p.scene.add(p.mesh);
       }
+    }
+    if (p.mipLevels > 1) {
+      p.mipLevel = Math.min(p.mipLevels - 1, Math.max(0, Math.round(S.lod)));
+      p.exp.mipUv.value.set(...setMipLevel(p.exp, p.mipLevel));
     }
     const d = S.distance > 0 ? S.distance : 1.8;  // a directional light's marker: its direction
     p.lightMarker.position.copy(uniforms.u_light.value).multiplyScalar(d);
@@ -202,9 +213,10 @@ function bindControls() {
   bind('viewtheta', 'view.0'); bind('viewphi', 'view.1'); bind('continuous', 'continuous'); bind('tiles', 'tiles');
   const live = panels.filter((p) => !p.error);
   const f = live.map((p) => features(p.exp.glsl));
-  $('lodrow').hidden = !f.some((x) => x.lod);
-  // The slider spans the coarsest level any panel has (lpyr's manifest: evaluation.lmax).
-  $('lod').max = Math.max(0, ...live.map((p) => p.exp.manifest.evaluation?.lmax ?? 0));
+  $('lodrow').hidden = !f.some((x) => x.lod) && !live.some((p) => p.mipLevels > 1);
+  // The slider spans the coarsest level any panel has (lpyr's manifest: evaluation.lmax; a mip
+  // chain: its last level, shown at the nearest whole level).
+  $('lod').max = Math.max(0, ...live.map((p) => Math.max(p.exp.manifest.evaluation?.lmax ?? 0, p.mipLevels - 1)));
   $('envopt').disabled = !f.some((x) => x.relit);
   // Dragging with Shift (or the right button) moves the light over the hemisphere instead of
   // orbiting: horizontal = phi, vertical = theta.
@@ -251,6 +263,8 @@ window.btfcViewer = {
   settings: S,
   set(changes) { Object.assign(S, changes); apply(); renderAll(); invalidate(); },
   errors: () => panels.filter((p) => p.error).map((p) => `${p.url}: ${p.error}`),
+  // Per panel: the levels each texture holds on the GPU, the mip levels of detail, the one shown.
+  levels: () => panels.filter((p) => !p.error).map((p) => ({ textures: p.levels, mipLevels: p.mipLevels, shown: p.mipLevel ?? 0 })),
   // Milliseconds per frame over n frames, each finished (a 1-pixel read-back waits for the GPU).
   measure(n = 20) {
     const px = new Uint8Array(4);

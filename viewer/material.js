@@ -14,13 +14,14 @@ uniform float u_intensity, u_exposure, u_lod;
 uniform int u_tonemap;       // 0 none, 1 reinhard
 uniform int u_light_kind;    // 0 light, 1 the export's environment (btf_relit)
 uniform bool u_auto_lod;
+uniform vec2 u_mip_uv;       // mip level of detail (export.js setMipLevel): that level's size / SIZE
 out vec4 btfv_color;
 
 vec3 btfv_eval(vec2 uv, vec3 wl, vec3 wv, float lod) {
 #ifdef HAS_LOD
   vec3 c = btf_eval_lod(uv, wl, wv, lod);
 #else
-  vec3 c = btf_eval(uv, wl, wv);
+  vec3 c = btf_eval(uv * u_mip_uv, wl, wv);   // uv scaled: the chains' base level is the level shown
 #endif
 #ifdef GREY
   c = c.rrr;   // a 1-channel BTF fills red only (the contract); shown grey, as btfc render does
@@ -181,7 +182,8 @@ export function makeMaterial(exp, kind, uniforms) {
   if (f.relit) defines.HAS_RELIT = '';
   if (exp.manifest.btf.channels === 1) defines.GREY = '';
   const u = { ...uniforms };
-  for (const [name, tex] of Object.entries(exp.textures)) u[`u_${name}`] = { value: tex };
+  for (const name of Object.keys(exp.textures)) u[`u_${name}`] = exp.bound[name];  // shared: setMipLevel swaps levels
+  u.u_mip_uv = exp.mipUv ?? { value: new THREE.Vector2(1, 1) };  // per export: its own chain's level
   return new THREE.RawShaderMaterial({
     glslVersion: THREE.GLSL3,
     defines,

@@ -126,6 +126,60 @@ try {
     }
     srv.stop();
   }
+  // Mip levels (issue 21, "the codec's level of detail"): every level of the export's mip chains
+  // (fmf's eigen-textures) on the GPU, shown by the level-of-detail slider. Flat mode under a
+  // directional light: every texel sees the same directions and fmf (color=rgb) is linear in its
+  // eigen-textures, whose level k is the 2^k x 2^k box average of level 0, so level 1 must be the
+  // 2 x 2 average of the level-0 picture (in linear light)
+  // and the last level (1 x 1) the average of the whole sample; blocks with a pixel clipped at 0
+  // or 255 are skipped.
+  for (const l of cfg.lod || []) {
+    const manifest = JSON.parse(fs.readFileSync(path.join(l.dir, 'manifest.json'), 'utf8'));
+    const chains = manifest.textures.filter((t) => t.levels > 1);
+    const { page, srv } = await openPage(browser, [l.dir], l.query);
+    const lv = await page.evaluate(() => window.btfcViewer.levels()[0]);
+    const want = Math.min(...chains.map((t) => t.levels));
+    report(chains.length > 0 && chains.every((t) => lv.textures[t.name] === t.levels) && lv.mipLevels === want,
+      `${l.name}: mip chains on the GPU ${JSON.stringify(lv.textures)}, ${lv.mipLevels} levels of detail (manifest: ` +
+      `${chains.map((t) => `${t.name} ${t.levels}`).join(', ')})`);
+    const shot = async (lod) => {
+      await page.evaluate((x) => window.btfcViewer.set({ lod: x }), lod);
+      return shootCanvas(page, path.join(work, `${l.name.replace(/\W+/g, '_')}.lod${lod}.png`));
+    };
+    const s0 = await shot(0), s1 = await shot(1), sl = await shot(want - 1);
+    const lin = (c) => { c /= 255; return c <= 0.04045 ? c / 12.92 : ((c + 0.055) / 1.055) ** 2.4; };
+    const enc = (x) => 255 * (x <= 0.0031308 ? 12.92 * x : 1.055 * x ** (1 / 2.4) - 0.055);
+    const px = (im, x, y, c) => im.px[(y * im.w + x) * im.ch + c];
+    let se = 0, n = 0, blocky = true, changed = 0;
+    for (let y = 0; y + 1 < s0.h; y += 2)
+      for (let x = 0; x + 1 < s0.w; x += 2)
+        for (let c = 0; c < 3; ++c) {
+          const q = [[0, 0], [1, 0], [0, 1], [1, 1]];
+          const v1 = q.map(([dx, dy]) => px(s1, x + dx, y + dy, c)), v0 = q.map(([dx, dy]) => px(s0, x + dx, y + dy, c));
+          if (Math.max(...v1) - Math.min(...v1) > 1) blocky = false;
+          changed += v0.some((v, i) => v !== v1[i]);
+          // Clipped at either end (fmf's sum can dip below 0 at dark texels): the average of clipped
+          // values is not the clipped average.
+          if (Math.max(...v0, v1[0]) === 255 || Math.min(...v0, v1[0]) === 0) continue;
+          se += (enc(v0.reduce((a, v) => a + lin(v), 0) / 4) - v1[0]) ** 2, ++n;
+        }
+    const db = 10 * Math.log10((255 * 255 * n) / Math.max(se, 1e-9));
+    report(blocky && changed > 0 && db >= l.min,
+      `${l.name}: level 1 is constant over 2 x 2 texels, differs from level 0 in ${changed} block channels, and equals ` +
+      `the 2 x 2 average of level 0 at ${db.toFixed(2)} dB (>= ${l.min}; ${n} block channels unclipped)`);
+    let mean = [0, 0, 0], spread = 0;
+    for (let i = 0; i < s0.w * s0.h; ++i)
+      for (let c = 0; c < 3; ++c) {
+        mean[c] += lin(s0.px[i * s0.ch + c]) / (s0.w * s0.h);
+        spread = Math.max(spread, Math.abs(sl.px[i * sl.ch + c] - sl.px[c]));
+      }
+    const top = [0, 1, 2].map((c) => sl.px[c]);
+    const off = Math.max(...[0, 1, 2].map((c) => Math.abs(enc(mean[c]) - top[c])));
+    report(spread === 0 && Math.max(...top) > 0 && off <= l.maxOff,
+      `${l.name}: level ${want - 1} (1 x 1) is one colour ${top} over the sample, the level-0 average ${mean.map(enc).map((v) => v.toFixed(1))} ` +
+      `(within ${l.maxOff}: ${off.toFixed(1)})`);
+    srv.stop();
+  }
   for (const b of cfg.broken) {
     const { page, srv } = await openPage(browser, [b.dir], cfg.query);
     const state = await page.evaluate(() => document.body.dataset.state);
