@@ -110,6 +110,28 @@ TEST(Svd, BlockKrylovStopsEarlyOnAFastDecayAndHandlesExhaustedRanges) {
   EXPECT_NEAR(s->rel_error_estimate(), actual_rel_error(small, 50, 80, *s), 1e-3);
 }
 
+TEST(Svd, TransposedProductKernelEqualsTheReference) {
+  // Every register width (l up to 8 x 16 and a fallback beyond), texel counts that leave tails of
+  // the 8- or 16-texel tiles, and more rows than one 2048-row chunk.
+  std::mt19937_64 rng(4);
+  std::uniform_real_distribution<float> u(-1.f, 1.f);
+  for (auto [m, n] : {std::pair<size_t, size_t>{2500, 203}, {37, 70}}) {
+    std::vector<float> b(m * n);
+    for (float& x : b) x = u(rng);
+    Eigen::Map<const Eigen::MatrixXf> B(b.data(), Eigen::Index(m), Eigen::Index(n));
+    for (int l : {1, 5, 16, 17, 33, 48, 80, 100, 128, 130}) {
+      Eigen::MatrixXf Y(Eigen::Index(m), l), Z;
+      for (Eigen::Index i = 0; i < Y.size(); ++i) Y.data()[i] = u(rng);
+      transposed_product(b.data(), m, n, Y, Z);
+      const Eigen::MatrixXd ref = B.cast<double>().transpose() * Y.cast<double>();
+      ASSERT_EQ(Z.rows(), Eigen::Index(n));
+      ASSERT_EQ(Z.cols(), l);
+      // Float sums of m products of magnitude <= 1: within m x 2^-24 x a few of the double result.
+      EXPECT_LT((Z.cast<double>() - ref).cwiseAbs().maxCoeff(), 4e-7 * double(m)) << "m " << m << " l " << l;
+    }
+  }
+}
+
 TEST(Svd, LargeGramEigenpairsEqualEigensSolver) {
   // 1100 > 1024: top_eigenpairs asks LAPACK (dsyevd) when built with OpenBLAS; Eigen's solver is
   // the reference. Eigenvalues agree to double round-off relative to the largest; eigenvectors
