@@ -8,8 +8,12 @@
 // Gram path would need a 19683^2 eigen-decomposition).
 //
 //   bench_fmf [--width 256] [--height 256] [--rank 32] [--power-iters 4] [--oversample 16]
-//             [--reference] [--dump FILE]   (FILE: raw float32 matrix for scripts/bench_sklearn.py)
+//             [--reference] [--dump FILE]   (FILE: raw float32 matrix for bench/peer_sklearn.sh)
 //             [--codec SPEC]  (time another codec's encode on the same input instead, e.g. lpyr)
+//             [--load FILE [--rows 19683] [--texels N]]  (factorize a --dump file, or its first N
+//             texels, instead of synthesizing)
+//             [--scheme krylov|power] [--svd-only]  (randomized scheme; skip the codec run)
+//             [--dump-only]  (with --dump: stop after writing the file)
 #include <sys/resource.h>
 
 #include <chrono>
@@ -17,6 +21,7 @@
 #include <cstdio>
 #include <cstring>
 #include <string>
+#include <vector>
 
 #include "codecs/codec.h"
 #include "core/svd.h"
@@ -38,8 +43,10 @@ static double peak_rss_gb() {
 int main(int argc, char** argv) {
   reexec_for_openblas(argc, argv);
   int width = 256, height = 256, rank = 32, power = 4, over = 16;
-  bool reference = false;
-  std::string dump, codec_spec;
+  bool reference = false, svd_only = false, dump_only = false;
+  size_t load_rows = 19683, load_texels = 0;
+  RandomizedScheme scheme = RandomizedScheme::block_krylov;
+  std::string dump, codec_spec, load;
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
     auto next = [&] { return i + 1 < argc ? std::atoi(argv[++i]) : 0; };
@@ -51,10 +58,51 @@ int main(int argc, char** argv) {
     else if (a == "--reference") reference = true;
     else if (a == "--dump" && i + 1 < argc) dump = argv[++i];
     else if (a == "--codec" && i + 1 < argc) codec_spec = argv[++i];
+    else if (a == "--load" && i + 1 < argc) load = argv[++i];
+    else if (a == "--rows") load_rows = size_t(next());
+    else if (a == "--texels") load_texels = size_t(next());
+    else if (a == "--svd-only") svd_only = true;
+    else if (a == "--dump-only") dump_only = true;
+    else if (a == "--scheme" && i + 1 < argc) scheme = std::string(argv[++i]) == "power" ? RandomizedScheme::power : RandomizedScheme::block_krylov;
     else {
       std::fprintf(stderr, "unknown argument %s\n", a.c_str());
       return 1;
     }
+  }
+  auto run_svd = [&](const float* B, size_t m, size_t n, double input_gb, int q, int p, const char* label) {
+    SvdOptions opt;
+    opt.max_rank = rank, opt.power_iters = q, opt.oversample = p, opt.method = SvdMethod::randomized, opt.scheme = scheme;
+    double t = now_s();
+    auto r = truncated_svd(B, m, n, opt);
+    const double secs = now_s() - t;
+    if (!r.ok()) {
+      std::fprintf(stderr, "%s\n", r.status().message().c_str());
+      std::exit(3);
+    }
+    // GEMM passes over B of width l = rank + oversample: 2q + 2 for power, 2 per block for krylov.
+    const int passes = scheme == RandomizedScheme::power ? 2 * q + 2 : 2 * r->iterations;
+    const double l = double(rank + p), flops = passes * 2.0 * double(m) * double(n) * l;
+    std::printf("%-10s rank %d q %d p %d %s: %.2f s, rel L2 error %.6f, %d passes, %.0f GFLOP/s in the passes over B, peak RSS %.2f GB (%.2f x input)\n",
+                label, rank, q, p, scheme == RandomizedScheme::power ? "power" : "krylov", secs, r->rel_error_estimate(), passes,
+                flops / secs / 1e9, peak_rss_gb(), peak_rss_gb() / input_gb);
+    std::fflush(stdout);
+    return r->rel_error_estimate();
+  };
+  if (!load.empty()) {
+    // A --dump file: m x n column-major float32, read into one buffer (the input of the peak RSS ratio).
+    std::FILE* f = std::fopen(load.c_str(), "rb");
+    if (!f) return 2;
+    std::fseek(f, 0, SEEK_END);
+    const size_t bytes = size_t(std::ftell(f));
+    std::fseek(f, 0, SEEK_SET);
+    const size_t m = load_rows, n = std::min(bytes / 4 / m, load_texels ? load_texels : bytes);
+    std::vector<float> B(m * n);
+    if (std::fread(B.data(), 4, B.size(), f) != B.size()) return 2;
+    std::fclose(f);
+    const double input_gb = double(B.size()) * 4 / 1e9;
+    std::printf("input: %s, %zu x %zu float32, %.2f GB\n", load.c_str(), m, n, input_gb);
+    run_svd(B.data(), m, n, input_gb, power, over, "fmf");
+    return 0;
   }
   SynthOptions so;
   so.width = width, so.height = height, so.seed = 1;
@@ -76,6 +124,7 @@ int main(int argc, char** argv) {
     std::fclose(f);
     std::printf("dumped %zu x %zu float32 matrix (column-major: rows = ABRDF, columns = texels) to %s\n", d.abrdf_size(),
                 d.num_texels(), dump.c_str());
+    if (dump_only) return 0;
   }
 
   if (!codec_spec.empty()) {
@@ -93,23 +142,9 @@ int main(int argc, char** argv) {
     std::printf("  kernels ran on %s\n", ocl::device_summary().c_str());
     return 0;
   }
-  auto run = [&](int q, int p, const char* label) {
-    SvdOptions opt;
-    opt.max_rank = rank, opt.power_iters = q, opt.oversample = p, opt.method = SvdMethod::randomized;
-    double t = now_s();
-    auto r = truncated_svd(btf->data(), d.abrdf_size(), d.num_texels(), opt);
-    const double secs = now_s() - t;
-    if (!r.ok()) {
-      std::fprintf(stderr, "%s\n", r.status().message().c_str());
-      std::exit(3);
-    }
-    // 2q + 2 GEMM passes over B of width l = rank + oversample.
-    const double l = double(rank + p), flops = (2.0 * q + 2) * 2.0 * double(d.num_values()) * l;
-    std::printf("%-10s rank %d q %d p %d: %.2f s, rel L2 error %.6f, %.0f GFLOP/s in the passes over B, peak RSS %.2f GB (%.2f x input)\n",
-                label, rank, q, p, secs, r->rel_error_estimate(), flops / secs / 1e9, peak_rss_gb(), peak_rss_gb() / input_gb);
-    return r->rel_error_estimate();
-  };
+  auto run = [&](int q, int p, const char* label) { return run_svd(btf->data(), d.abrdf_size(), d.num_texels(), input_gb, q, p, label); };
   const double err = run(power, over, "fmf");
+  if (svd_only) return 0;
   // The codec end to end (adds the half quantization and the model build).
   auto spec = resolve_spec("fmf:rank=" + std::to_string(rank) + ":power_iters=" + std::to_string(power) + ":oversample=" + std::to_string(over));
   Context ctx;

@@ -9,10 +9,14 @@
 //    (LAPACK's dsyevd from k = 1025 on when built with OpenBLAS): right for matrices with one
 //    small side (one view, few texels), and for large ranks of a side up to 4096, where it costs
 //    the same at every rank and less than a sketch of 1/8 of that side.
-//  - randomized (Halko, Martinsson, Tropp 2011, Alg. 4.4 with re-orthonormalised power
-//    iterations): sketch Y = B Omega with l = C + oversample Gaussian columns, q power
-//    iterations, Q = orth(Y), then the small SVD of Q^T B. Each pass over B is one float GEMM
-//    through Eigen (multi-threaded); B is never copied. 2q + 2 passes in all.
+//  - randomized, two schemes over the same passes (each pass over B is one float GEMM of width
+//    l = C + oversample through Eigen and OpenBLAS, multi-threaded; B is never copied):
+//    block_krylov (default): randomized block Krylov (Musco and Musco 2015), up to q + 1 blocks
+//    of l columns kept side by side, two passes per block, no final pass (svd.cpp, krylov_svd),
+//    stopping early once a block no longer improves the rank-C error; at most 2q + 2 passes.
+//    power: Halko, Martinsson, Tropp 2011, Alg. 4.4 with re-orthonormalised power iterations:
+//    sketch Y = B Omega, q power iterations, Q = orth(Y), then the small SVD of Q^T B; 2q + 2
+//    passes. The out-of-core path (codecs/fmf/ooc_svd.h) streams this one.
 //
 // Output: U (m x C, orthonormal columns) and SxV = B^T U (n x C, the right singular vectors
 // already multiplied by the singular values, seed 000 section 4: V := V Sigma), so that
@@ -33,6 +37,7 @@ namespace btfc {
 // automatic: exact when the small side is <= 1024, or <= k_exact_auto_max and the sketch
 // (rank + oversample) would be at least 1/8 of it; else randomized.
 enum class SvdMethod { automatic, exact, randomized };
+enum class RandomizedScheme { block_krylov, power };
 constexpr size_t k_exact_auto_max = 4096;
 
 struct SvdOptions {
@@ -42,6 +47,7 @@ struct SvdOptions {
   int oversample = 16;
   int power_iters = 4;
   uint64_t seed = 1;
+  RandomizedScheme scheme = RandomizedScheme::block_krylov;
   Progress* progress = nullptr;
 };
 
@@ -57,6 +63,7 @@ struct SvdResult {
   int requested_rank = 0;
   int data_rank_limit = 0;  // min(m, n, numerical rank seen)
   bool target_reached = true;
+  int iterations = 0;       // randomized block_krylov: blocks computed (2 passes each); else 0
   // Estimated relative Frobenius error sqrt(max(0, total - kept) / total).
   double rel_error_estimate() const;
 };
@@ -70,6 +77,11 @@ void top_eigenpairs(const Eigen::MatrixXd& G, Eigen::Index l, Eigen::VectorXd& l
 // with target_rel_error the smallest such rank reaching it; at least 1. Sets data_rank and
 // reached. Shared by truncated_svd and the out-of-core path (ooc_svd.h).
 int choose_rank(const Eigen::VectorXd& lambda, double total, const SvdOptions& opt, int& data_rank, bool& reached);
+
+// Z = B^T Y (n x l) for B m x n column-major and Y m x l: the randomized passes' product. On
+// CPUs with AVX-512 (checked at run time) a kernel that reads B in place (svd.cpp), for l <= 128;
+// else an Eigen (OpenBLAS) GEMM. Float sums, within GEMM round-off of each other.
+void transposed_product(const float* B, size_t m, size_t n, const Eigen::MatrixXf& Y, Eigen::MatrixXf& Z);
 
 // B is column-major with leading dimension m. Fails on m == 0 or n == 0.
 Result<SvdResult> truncated_svd(const float* B, size_t m, size_t n, const SvdOptions& opt);

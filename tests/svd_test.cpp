@@ -1,8 +1,11 @@
 // core/svd.h: the exact path's LAPACK eigensolver against Eigen's (the reference), the automatic
-// choice of path, and the reuse of exact decompositions during a byte-budget search.
+// choice of path, the reuse of exact decompositions during a byte-budget search, and the two
+// randomized schemes (block Krylov, power iterations) against the Eckart-Young optimum.
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+#include <cmath>
+#include <cstdio>
 #include <random>
 
 #include "core/svd.h"
@@ -21,6 +24,112 @@ std::vector<float> test_matrix(size_t m, size_t n, int r, uint64_t seed) {
   Eigen::MatrixXf B = U * V.transpose();
   for (Eigen::Index i = 0; i < B.size(); ++i) B.data()[i] += 1e-3f * g(rng);
   return std::vector<float>(B.data(), B.data() + B.size());
+}
+
+// A slowly decaying spectrum, where power iterations need many passes: sigma_i = 1 / (1 + i)
+// over the whole small side, with random singular vectors. Returns B and its exact singular values.
+std::vector<float> slow_decay_matrix(size_t m, size_t n, uint64_t seed, Eigen::VectorXd& sigma) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> g(0.0, 1.0);
+  const Eigen::Index k = Eigen::Index(std::min(m, n));
+  Eigen::MatrixXd A(m, k), C(n, k);
+  for (Eigen::Index i = 0; i < A.size(); ++i) A.data()[i] = g(rng);
+  for (Eigen::Index i = 0; i < C.size(); ++i) C.data()[i] = g(rng);
+  const Eigen::MatrixXd U = Eigen::HouseholderQR<Eigen::MatrixXd>(A).householderQ() * Eigen::MatrixXd::Identity(Eigen::Index(m), k);
+  const Eigen::MatrixXd V = Eigen::HouseholderQR<Eigen::MatrixXd>(C).householderQ() * Eigen::MatrixXd::Identity(Eigen::Index(n), k);
+  sigma.resize(k);
+  for (Eigen::Index i = 0; i < k; ++i) sigma(i) = 1.0 / (1.0 + double(i));
+  const Eigen::MatrixXf B = (U * sigma.asDiagonal() * V.transpose()).cast<float>();
+  return std::vector<float>(B.data(), B.data() + B.size());
+}
+
+// ||B - U SxV^T||_F / ||B||_F, in double.
+double actual_rel_error(const std::vector<float>& b, size_t m, size_t n, const SvdResult& r) {
+  Eigen::Map<const Eigen::MatrixXf> B(b.data(), Eigen::Index(m), Eigen::Index(n));
+  const Eigen::MatrixXd D = B.cast<double>() - r.U.cast<double>() * r.SxV.cast<double>().transpose();
+  return std::sqrt(D.squaredNorm() / B.cast<double>().squaredNorm());
+}
+
+TEST(Svd, BlockKrylovIsWithinOnePercentOfEckartYoungInFewerPasses) {
+  const size_t m = 600, n = 1500;
+  Eigen::VectorXd sigma;
+  const std::vector<float> b = slow_decay_matrix(m, n, 7, sigma);
+  for (int C : {8, 32}) {
+    const double optimum = std::sqrt(sigma.tail(sigma.size() - C).squaredNorm() / sigma.squaredNorm());
+    SvdOptions o;
+    o.max_rank = C, o.oversample = 16, o.power_iters = 4, o.method = SvdMethod::randomized;
+    auto krylov = truncated_svd(b.data(), m, n, o);
+    ASSERT_TRUE(krylov.ok());
+    // Power iterations with the passes the Krylov run took (2 per block = 2q + 2).
+    o.scheme = RandomizedScheme::power, o.power_iters = krylov->iterations - 1;
+    auto power = truncated_svd(b.data(), m, n, o);
+    ASSERT_TRUE(power.ok());
+    EXPECT_EQ(krylov->method, "randomized");
+    const double ek = actual_rel_error(b, m, n, *krylov), ep = actual_rel_error(b, m, n, *power);
+    std::printf("rank %d: optimum %.6f, block Krylov %.6f (%d blocks), power iterations in as many passes %.6f\n", C, optimum, ek,
+                krylov->iterations, ep);
+    EXPECT_GE(ek / optimum, 1 - 1e-4) << "cannot beat Eckart-Young";
+    EXPECT_LE(ek / optimum, 1.01) << "rank " << C;
+    EXPECT_LE(krylov->iterations, 5);
+    EXPECT_LT(ek, ep);
+    // The estimate is the actual error of U SxV^T (an orthogonal projection of B's rows).
+    EXPECT_NEAR(krylov->rel_error_estimate(), ek, 1e-4 * ek);
+    EXPECT_LT(ek, ep);  // in at most as many passes
+    // U orthonormal; singular values descending and equal to the data's to the error's order.
+    const Eigen::MatrixXd UtU = krylov->U.cast<double>().transpose() * krylov->U.cast<double>();
+    EXPECT_LT((UtU - Eigen::MatrixXd::Identity(C, C)).cwiseAbs().maxCoeff(), 1e-5);
+    for (int i = 0; i < C; ++i) EXPECT_NEAR(krylov->S(i), sigma(i), 0.02 * sigma(i)) << i;
+  }
+}
+
+TEST(Svd, BlockKrylovStopsEarlyOnAFastDecayAndHandlesExhaustedRanges) {
+  // Rank-60 structure + small noise: the first blocks reach the optimum, later ones add nothing.
+  const size_t m = 700, n = 900;
+  const std::vector<float> b = test_matrix(m, n, 60, 9);
+  SvdOptions o;
+  o.max_rank = 16, o.oversample = 16, o.power_iters = 8, o.method = SvdMethod::randomized;
+  auto r = truncated_svd(b.data(), m, n, o);
+  ASSERT_TRUE(r.ok());
+  EXPECT_LT(r->iterations, 9) << "the error-driven stop";
+  o.method = SvdMethod::exact;
+  auto exact = truncated_svd(b.data(), m, n, o);
+  ASSERT_TRUE(exact.ok());
+  EXPECT_LE(r->rel_error_estimate() / exact->rel_error_estimate(), 1.01);
+  // A zero matrix and a basis as wide as the small side (blocks capped there).
+  const std::vector<float> zero(50 * 80, 0.f);
+  o.method = SvdMethod::randomized, o.max_rank = 4, o.oversample = 6;
+  auto z = truncated_svd(zero.data(), 50, 80, o);
+  ASSERT_TRUE(z.ok());
+  EXPECT_EQ(z->S.size(), 1);
+  EXPECT_EQ(z->SxV.cwiseAbs().maxCoeff(), 0.f);
+  EXPECT_TRUE(z->U.allFinite());
+  const std::vector<float> small = test_matrix(50, 80, 40, 2);
+  auto s = truncated_svd(small.data(), 50, 80, o);
+  ASSERT_TRUE(s.ok());
+  EXPECT_LE(s->iterations * 10, 50);
+  EXPECT_NEAR(s->rel_error_estimate(), actual_rel_error(small, 50, 80, *s), 1e-3);
+}
+
+TEST(Svd, TransposedProductKernelEqualsTheReference) {
+  // Every register width (l up to 8 x 16 and a fallback beyond), texel counts that leave tails of
+  // the 8- or 16-texel tiles, and more rows than one 2048-row chunk.
+  std::mt19937_64 rng(4);
+  std::uniform_real_distribution<float> u(-1.f, 1.f);
+  for (auto [m, n] : {std::pair<size_t, size_t>{2500, 203}, {37, 70}}) {
+    std::vector<float> b(m * n);
+    for (float& x : b) x = u(rng);
+    Eigen::Map<const Eigen::MatrixXf> B(b.data(), Eigen::Index(m), Eigen::Index(n));
+    for (int l : {1, 5, 16, 17, 33, 48, 80, 100, 128, 130}) {
+      Eigen::MatrixXf Y(Eigen::Index(m), l), Z;
+      for (Eigen::Index i = 0; i < Y.size(); ++i) Y.data()[i] = u(rng);
+      transposed_product(b.data(), m, n, Y, Z);
+      const Eigen::MatrixXd ref = B.cast<double>().transpose() * Y.cast<double>();
+      ASSERT_EQ(Z.rows(), Eigen::Index(n));
+      ASSERT_EQ(Z.cols(), l);
+      // Float sums of m products of magnitude <= 1: within m x 2^-24 x a few of the double result.
+      EXPECT_LT((Z.cast<double>() - ref).cwiseAbs().maxCoeff(), 4e-7 * double(m)) << "m " << m << " l " << l;
+    }
+  }
 }
 
 TEST(Svd, LargeGramEigenpairsEqualEigensSolver) {
