@@ -187,8 +187,8 @@ Result<SvdResult> exact_svd(ConstMapF& B, const SvdOptions& opt) {
 // sequential sum per lane over the rows, so results do not depend on the thread count.
 #ifdef BTFC_THIN_TN_AVX512
 template <int NV, int TJ>
-__attribute__((target("avx512f"))) void thin_tn_tile(const float* B, size_t ldb, const float* Yr, size_t k0, size_t k1, size_t j0,
-                                                     float* Zr, bool first) {
+__attribute__((target("avx512f"))) void thin_tn_tile_avx512(const float* B, size_t ldb, const float* Yr, size_t k0, size_t k1,
+                                                            size_t j0, float* Zr, bool first) {
   constexpr int L = 16 * NV;
   __m512 acc[TJ][NV];
   for (int t = 0; t < TJ; ++t)
@@ -220,8 +220,8 @@ void thin_tn(const float* B, size_t m, size_t n, const float* Yr, float* Zr) {
     for (size_t k0 = 0; k0 < m; k0 += k_rows) {
       const size_t k1 = std::min(m, k0 + k_rows);
       size_t j = j0;
-      for (; j + TJ <= j1; j += TJ) thin_tn_tile<NV, TJ>(B, m, Yr, k0, k1, j, Zr, k0 == 0);
-      for (; j < j1; ++j) thin_tn_tile<NV, 1>(B, m, Yr, k0, k1, j, Zr, k0 == 0);
+      for (; j + TJ <= j1; j += TJ) thin_tn_tile_avx512<NV, TJ>(B, m, Yr, k0, k1, j, Zr, k0 == 0);
+      for (; j < j1; ++j) thin_tn_tile_avx512<NV, 1>(B, m, Yr, k0, k1, j, Zr, k0 == 0);
     }
   }
 }
