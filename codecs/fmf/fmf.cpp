@@ -22,7 +22,9 @@ const ParamSpec k_params[] = {
     {"color", ParamSpec::Type::choice, "rgb", 0, 0, {"rgb", "dfmf"}, "rgb: colour in the matrix rows (paper); dfmf: per-channel log-luminance/chroma (Bonn DFMF model 11)"},
     {"svd", ParamSpec::Type::choice, "auto", 0, 0, {"auto", "exact", "randomized"}, "auto: exact when the small side of the matrix is <= 1024, or <= 4096 with rank + oversample >= 1/8 of it, else randomized"},
     {"oversample", ParamSpec::Type::integer, "16", 0, 1024, {}, "randomized SVD: extra sketch columns"},
-    {"power_iters", ParamSpec::Type::integer, "4", 0, 32, {}, "randomized SVD: power iterations"},
+    {"power_iters", ParamSpec::Type::integer, "4", 0, 32, {},
+     "randomized SVD: iterations q (in core: block Krylov, at most q + 1 blocks of 2 passes, stops when converged; "
+     "out of core: q power iterations)"},
     {"precision", ParamSpec::Type::choice, "half", 0, 0, {"half", "float", "q"},
      "storage of U and SxV: half / float, or q = per-component quantized integers, zstd-coded (fmf_quant.h)"},
     {"bits", ParamSpec::Type::integer, "8", 2, 20, {}, "precision=q: step = 2^-bits x RMS of the strongest eigen-texture (SxV column), U column k's step / sigma_k (equal error per component)"},
