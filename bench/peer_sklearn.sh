@@ -22,12 +22,12 @@
 # Usage: bench/peer_sklearn.sh [--build DIR] [--matrix FILE] [--workdir DIR] [--ranks "16 32 64"]
 #                              [--repeat 2] [--keep]
 #   --matrix: an existing dump (not removed); else the dump goes to WORKDIR/ubo2003.f32 (default
-#   /work/tmp-fmf; needs 5.2 GB) and is removed at the end unless --keep.
+#   BUILD/peer-sklearn; needs 5.2 GB) and is removed at the end unless --keep.
 # Needs python3-sklearn (scripts/setup.sh installs it).
 set -euo pipefail
 BUILD=build
 MATRIX=""
-WORKDIR=/work/tmp-fmf
+WORKDIR=""
 RANKS="16 32 64"
 REPEAT=2
 KEEP=0
@@ -43,6 +43,7 @@ while [ $# -gt 0 ]; do
   esac
 done
 BENCH="$BUILD/bench/bench_fmf"
+WORKDIR=${WORKDIR:-$BUILD/peer-sklearn}  # inside the build folder (ignored by git)
 [ -x "$BENCH" ] || { echo "no $BENCH (build first)" >&2; exit 1; }
 # Debian's python3 (python3-sklearn, numpy on the system's OpenBLAS), or the first that imports sklearn.
 PY=""
