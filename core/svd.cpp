@@ -269,24 +269,29 @@ MatrixXf orthonormalize(const MatrixXf& Y) {
   return Q.cast<float>();
 }
 
+// Gaussian test matrix (rows x cols) from a seeded engine: Box-Muller on raw 64-bit draws so
+// the numbers do not depend on the standard library's distribution implementation.
+MatrixXf gaussian(Index rows, Index cols, uint64_t seed) {
+  MatrixXf Om(rows, cols);
+  std::mt19937_64 rng(seed);
+  const double k_two_pi = 6.283185307179586;
+  for (Index i = 0; i < Om.size(); i += 2) {
+    double u1 = (double(rng() >> 11) + 0.5) * (1.0 / 9007199254740992.0);
+    double u2 = (double(rng() >> 11) + 0.5) * (1.0 / 9007199254740992.0);
+    double rad = std::sqrt(-2.0 * std::log(u1));
+    Om.data()[i] = float(rad * std::cos(k_two_pi * u2));
+    if (i + 1 < Om.size()) Om.data()[i + 1] = float(rad * std::sin(k_two_pi * u2));
+  }
+  return Om;
+}
+
 Result<SvdResult> power_svd(ConstMapF& B, const SvdOptions& opt) {
   const Index m = B.rows(), n = B.cols();
   const Index l = std::min<Index>(std::min(m, n), Index(opt.max_rank) + opt.oversample);
   if (opt.progress) opt.progress->start("fmf randomized SVD", uint64_t(2 * opt.power_iters + 3));
   auto step = [&] { if (opt.progress) opt.progress->advance(); };
 
-  // Gaussian test matrix from a seeded engine: Box-Muller on raw 64-bit draws so the numbers
-  // do not depend on the standard library's distribution implementation.
-  MatrixXf Omega(n, l);
-  std::mt19937_64 rng(opt.seed);
-  const double k_two_pi = 6.283185307179586;
-  for (Index i = 0; i < Omega.size(); i += 2) {
-    double u1 = (double(rng() >> 11) + 0.5) * (1.0 / 9007199254740992.0);
-    double u2 = (double(rng() >> 11) + 0.5) * (1.0 / 9007199254740992.0);
-    double rad = std::sqrt(-2.0 * std::log(u1));
-    Omega.data()[i] = float(rad * std::cos(k_two_pi * u2));
-    if (i + 1 < Omega.size()) Omega.data()[i + 1] = float(rad * std::sin(k_two_pi * u2));
-  }
+  MatrixXf Omega = gaussian(n, l, opt.seed);
   SvdResult r;
   r.method = "randomized";
   r.requested_rank = opt.max_rank;
@@ -325,20 +330,6 @@ Result<SvdResult> power_svd(ConstMapF& B, const SvdOptions& opt) {
 }
 
 
-// Gaussian matrix (rows x cols) from the seeded engine (as power_svd's Omega).
-MatrixXf gaussian(Index rows, Index cols, uint64_t seed) {
-  MatrixXf Om(rows, cols);
-  std::mt19937_64 rng(seed);
-  const double k_two_pi = 6.283185307179586;
-  for (Index i = 0; i < Om.size(); i += 2) {
-    double u1 = (double(rng() >> 11) + 0.5) * (1.0 / 9007199254740992.0);
-    double u2 = (double(rng() >> 11) + 0.5) * (1.0 / 9007199254740992.0);
-    double rad = std::sqrt(-2.0 * std::log(u1));
-    Om.data()[i] = float(rad * std::cos(k_two_pi * u2));
-    if (i + 1 < Om.size()) Om.data()[i + 1] = float(rad * std::sin(k_two_pi * u2));
-  }
-  return Om;
-}
 
 // X := an orthonormal basis of X's columns orthogonal to P's: block classical Gram-Schmidt and
 // Householder QR, twice ("twice is enough"; the second round after normalising, so a block that
