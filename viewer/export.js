@@ -65,7 +65,8 @@ export async function loadExport(url) {
   const shaderFile = shaderFileOf(manifest);
   const glsl = await (await fetchOk(url + shaderFile, shaderFile)).text();
   const samplers = checkShader(glsl, shaderFile);
-  const textures = {}, mips = {};
+  // Keyed by texture name: no prototype, so a texture named "__proto__" is one more entry.
+  const textures = Object.create(null), mips = Object.create(null);
   // Fetched in parallel: an export has up to ~20 files and the page waits for all of them.
   await Promise.all(manifest.textures.map(async (t) => {
     const file = textureFileOf(t);
@@ -76,7 +77,7 @@ export async function loadExport(url) {
     mips[t.name] = levels;
   }));
   // The uniforms the materials share: setMipLevel swaps a chain's level in for all of them.
-  const bound = {};
+  const bound = Object.create(null);
   for (const [name, tex] of Object.entries(textures)) bound[name] = { value: tex };
   return { url, manifest, glsl, textures, mips, bound };
 }
