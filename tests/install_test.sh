@@ -78,7 +78,7 @@ fi
 # must serve the page and every module it imports; without it, btfc view must name the installed
 # viewer directory and say the npm packages are missing.
 V="$P/share/btfc/viewer"
-for f in index.html main.js export.js ktx2.js material.js shapes.js style.css; do
+for f in index.html main.js export.js manifest.js ktx2.js material.js shapes.js style.css; do
   cmp -s "$SOURCE_DIR/viewer/$f" "$V/$f" || { echo "FAIL viewer-installed: $V/$f"; fails=$((fails + 1)); vmissing=1; }
 done
 [ -z "${vmissing:-}" ] && echo "ok   viewer-installed"

@@ -1,8 +1,9 @@
 // Loads one `btfc export` directory (docs/exports.md): manifest.json, every texture it lists
 // (KTX2), and btf.frag. Each failure becomes an Error whose message names the file and the
-// problem, because the page shows that message to the user as is.
+// problem, because the page shows that message to the user as is. The checks themselves are in
+// manifest.js (no three.js, so the fuzzer runs them under node); this file fetches and uploads.
 import * as THREE from 'three';
-import { parseKtx2 } from './ktx2.js';
+import { checkShader, checkTexture, parseManifest, shaderFileOf, textureFileOf } from './manifest.js';
 
 async function fetchOk(url, what) {
   let r;
@@ -13,14 +14,6 @@ async function fetchOk(url, what) {
   }
   if (!r.ok) throw new Error(`${what}: ${r.status === 404 ? 'missing' : 'cannot be read'} (HTTP ${r.status} for ${url})`);
   return r;
-}
-
-// The sampler type each u_<name> is declared with in the shader: it decides 2D vs 2D array and
-// whether the data are integers, so a manifest and a shader that disagree are caught here.
-function samplerTypes(glsl) {
-  const m = {};
-  for (const x of glsl.matchAll(/uniform\s+(?:\w+p\s+)?([iu]?sampler2D(?:Array)?)\s+u_(\w+)\s*;/g)) m[x[2]] = x[1];
-  return m;
 }
 
 function makeTexture(t, k, sampler) {
@@ -68,41 +61,23 @@ function makeLevels(t, k, sampler) {
 export async function loadExport(url) {
   if (!url.endsWith('/')) url += '/';
   const mr = await fetchOk(url + 'manifest.json', 'manifest.json');
-  const text = await mr.text();
-  let manifest;
-  try {
-    manifest = JSON.parse(text);
-  } catch (e) {
-    throw new Error(`manifest.json is not valid JSON (${e.message})`);
-  }
-  if (manifest.format !== 'btfc-export') throw new Error(`manifest.json: "format" is ${JSON.stringify(manifest.format)}, not "btfc-export"`);
-  for (const key of ['codec', 'btf', 'textures', 'shader'])
-    if (!(key in manifest)) throw new Error(`manifest.json: no "${key}" entry`);
-  if (!Array.isArray(manifest.textures)) throw new Error('manifest.json: "textures" is not a list');
-  const shaderFile = manifest.shader.file || 'btf.frag';
+  const manifest = parseManifest(await mr.text());
+  const shaderFile = shaderFileOf(manifest);
   const glsl = await (await fetchOk(url + shaderFile, shaderFile)).text();
-  if (!/^\s*#version 300 es/.test(glsl)) throw new Error(`${shaderFile}: does not start with "#version 300 es"`);
-  const samplers = samplerTypes(glsl);
-  const textures = {}, mips = {};
+  const samplers = checkShader(glsl, shaderFile);
+  // Keyed by texture name: no prototype, so a texture named "__proto__" is one more entry.
+  const textures = Object.create(null), mips = Object.create(null);
   // Fetched in parallel: an export has up to ~20 files and the page waits for all of them.
   await Promise.all(manifest.textures.map(async (t) => {
-    const file = t.file || `${t.name}.ktx2`;
-    const k = parseKtx2(await (await fetchOk(url + file, `texture ${t.name} (${file})`)).arrayBuffer(), file);
-    // The manifest and the file must agree: a stale or mixed-up export would render nonsense.
-    if (k.format.name !== t.format || k.width !== t.width || k.height !== t.height || k.layers !== t.layers ||
-        k.levels !== (t.levels ?? 1))
-      throw new Error(`${file}: the file is ${k.format.name} ${k.width} x ${k.height} x ${k.layers} layers x ${k.levels} levels, ` +
-        `manifest.json says ${t.format} ${t.width} x ${t.height} x ${t.layers} x ${t.levels ?? 1}`);
-    const sampler = samplers[t.name];
-    if (!sampler) throw new Error(`${shaderFile}: declares no sampler u_${t.name} for texture ${t.name}`);
-    if (/^[iu]/.test(sampler) !== Boolean(k.format.integer))
-      throw new Error(`${file}: ${k.format.name} cannot be read by the shader's ${sampler} u_${t.name}`);
+    const file = textureFileOf(t);
+    const buf = await (await fetchOk(url + file, `texture ${t.name} (${file})`)).arrayBuffer();
+    const { k, sampler } = checkTexture(t, buf, samplers, shaderFile);
     const levels = makeLevels(t, k, sampler);
     textures[t.name] = levels[0];
     mips[t.name] = levels;
   }));
   // The uniforms the materials share: setMipLevel swaps a chain's level in for all of them.
-  const bound = {};
+  const bound = Object.create(null);
   for (const [name, tex] of Object.entries(textures)) bound[name] = { value: tex };
   return { url, manifest, glsl, textures, mips, bound };
 }

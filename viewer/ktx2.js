@@ -48,14 +48,24 @@ export function parseKtx2(buf, what) {
   if (!f) fail(`vkFormat ${vkFormat} is not one btfc writes`);
   if (scheme !== 0) fail(`supercompression ${scheme} is not supported (btfc writes none)`);
   if (depth !== 0 || faces !== 1) fail('3D and cube textures are not supported');
+  // btfc writes 2D textures: a 0 would be a 1D texture (height) or an invalid file (width).
+  if (width === 0 || height === 0) fail(`${width} x ${height} texels (btfc writes 2D textures, at least 1 x 1)`);
+  // At most a full chain down to 1 x 1 (the KTX2 rule): the page makes one GPU texture per level,
+  // and levels of one texel each could all share the same bytes.
+  let chain = 1;
+  for (let s = Math.max(width, height); s > 1; s = Math.floor(s / 2)) ++chain;
+  if (levels > chain) fail(`${levels} mip levels, a ${width} x ${height} texture has at most ${chain}`);
   if (80 + 24 * levels > buf.byteLength) fail('truncated level index');
   // KVD: key\0value\0 pairs, each with a u32 length and 4-byte padding.
   const kv = {};
   const kvdOff = u32(56), kvdLen = u32(60);
   if (kvdOff + kvdLen > buf.byteLength) fail('key/value data beyond the end of the file');
+  const utf8 = new TextDecoder();   // one for all entries: the KVD may hold thousands of tiny ones
   for (let p = kvdOff; p + 4 <= kvdOff + kvdLen;) {
     const n = u32(p);
-    const s = new TextDecoder().decode(u8.subarray(p + 4, p + 4 + n));
+    // An entry must stay inside the KVD (else it would read the level data as text).
+    if (p + 4 + n > kvdOff + kvdLen) fail(`key/value entry at byte ${p} (${n} bytes) runs past the key/value data`);
+    const s = utf8.decode(u8.subarray(p + 4, p + 4 + n));
     const z = s.indexOf('\0');
     if (z > 0) kv[s.slice(0, z)] = s.slice(z + 1).replace(/\0$/, '');
     p += 4 + n + ((4 - (n % 4)) % 4);
@@ -66,7 +76,8 @@ export function parseKtx2(buf, what) {
   const mips = [];
   for (let i = 0; i < levels; ++i) {
     const off = u64(80 + 24 * i), len = u64(88 + 24 * i);
-    const w = Math.max(1, width >> i), h = Math.max(1, height >> i);
+    // Not width >> i: >> works on int32, so a width of 2^31 or more would turn negative (1 texel).
+    const w = Math.max(1, Math.floor(width / 2 ** i)), h = Math.max(1, Math.floor(height / 2 ** i));
     const expect = w * h * nLayers * f.channels * f.bytes;
     if (len !== expect) fail(`level ${i} holds ${len} bytes, ${w} x ${h} x ${nLayers} ${f.name} needs ${expect}`);
     if (off + len > buf.byteLength) fail(`truncated: level ${i} ends at byte ${off + len}, the file has ${buf.byteLength}`);
