@@ -1,9 +1,14 @@
 #include "core/limits.h"
 
+#include <unistd.h>
+
+#include <algorithm>
 #include <atomic>
 #include <cctype>
 #include <cstdio>
 #include <cstdlib>
+#include <fstream>
+#include <string>
 
 namespace btfc {
 
@@ -11,19 +16,41 @@ namespace {
 
 std::atomic<size_t> g_limit{0};  // 0 = not set yet
 
+// cgroup v2's memory.max of this process ("max" or a byte count); 0 when there is none.
+size_t cgroup_memory_max() {
+  std::ifstream cg("/proc/self/cgroup");
+  std::string line, rel;
+  while (std::getline(cg, line))
+    if (line.rfind("0::", 0) == 0) rel = line.substr(3);
+  if (rel.empty()) return 0;
+  std::ifstream f("/sys/fs/cgroup" + (rel == "/" ? std::string() : rel) + "/memory.max");
+  std::string v;
+  if (!(f >> v) || v.empty() || !std::isdigit(static_cast<unsigned char>(v[0]))) return 0;
+  auto r = parse_byte_size(v);
+  return r.ok() ? r.value() : 0;
+}
+
 size_t env_limit() {
   const char* e = std::getenv("BTFC_MAX_MEMORY");
-  if (!e || !*e) return k_default_memory_limit;
+  if (!e || !*e) return default_memory_limit();
   Result<size_t> r = parse_byte_size(e);
   if (!r.ok() || r.value() == 0) {
     std::fprintf(stderr, "btfc: warning: ignoring BTFC_MAX_MEMORY='%s' (%s)\n", e,
                  r.ok() ? "zero" : r.status().message().c_str());
-    return k_default_memory_limit;
+    return default_memory_limit();
   }
   return r.value();
 }
 
 }  // namespace
+
+size_t default_memory_limit() {
+  size_t lim = k_max_default_memory_limit;
+  const long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
+  if (pages > 0 && page > 0 && size_t(pages) <= lim / size_t(page)) lim = size_t(pages) * size_t(page);
+  if (const size_t cg = cgroup_memory_max(); cg > 0) lim = std::min(lim, cg);
+  return lim;
+}
 
 size_t memory_limit() {
   size_t v = g_limit.load(std::memory_order_relaxed);

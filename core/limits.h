@@ -9,9 +9,12 @@
 //     memory limit *before* allocating, and fails with an error that names the size and the
 //     limit.
 // The limit defaults to the environment variable BTFC_MAX_MEMORY (bytes, or with a K/M/G/T
-// suffix, powers of 1024) when set and valid, else 2^40 bytes (1 TiB: no practical limit, only
-// the overflow guard). A malformed BTFC_MAX_MEMORY is ignored with a warning on stderr rather
-// than turning every command into an error. Thread-safe (an atomic).
+// suffix, powers of 1024) when set and valid, else to the machine's memory
+// (default_memory_limit()): a decode declared bigger than all the RAM there is cannot succeed
+// (it would only swap the machine to a halt or be killed by the OOM killer), so a small file
+// that declares one (a "decompression bomb") is refused with an error instead. A malformed
+// BTFC_MAX_MEMORY is ignored with a warning on stderr rather than turning every command into an
+// error. Thread-safe (an atomic).
 #pragma once
 #include <cstddef>
 #include <string>
@@ -20,7 +23,13 @@
 
 namespace btfc {
 
-constexpr size_t k_default_memory_limit = size_t(1) << 40;
+// The overflow guard: no limit is ever above 1 TiB unless set explicitly.
+constexpr size_t k_max_default_memory_limit = size_t(1) << 40;
+
+// The default limit without BTFC_MAX_MEMORY: the physical memory (sysconf), lowered to the
+// cgroup's memory.max when the process runs in a container that sets one; at most
+// k_max_default_memory_limit, and k_max_default_memory_limit when neither can be read.
+size_t default_memory_limit();
 
 // The current limit in bytes (reads BTFC_MAX_MEMORY on first use).
 size_t memory_limit();

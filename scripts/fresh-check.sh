@@ -23,10 +23,12 @@ git clone -q --no-hardlinks "$SRC" "$DIR"
 echo "fresh-check: $(git -C "$DIR" log -1 --oneline) in $DIR"
 cd "$DIR"
 # CCACHE=1: compile through the developer's ccache (same objects, faster; the tests still run
-# on the fresh tree). Off by default: a fresh machine has no cache.
+# on the fresh tree). Off by default (BTFC_CCACHE=0 for scripts/build.sh and the sanitizer
+# build): a fresh machine has no cache.
 if [ "${CCACHE:-0}" = 1 ] && command -v ccache >/dev/null; then
-  export BTFC_CMAKE_ARGS="-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache"
-  export CCACHE_BASEDIR=$PARENT
+  export BTFC_CCACHE=1
+else
+  export BTFC_CCACHE=0
 fi
 t0=$(date +%s)
 # The README's test command (set-up, build, both passes), with other BLAS kernels.

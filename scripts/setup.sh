@@ -3,7 +3,10 @@
 # Package list: ../shared/spec/toolchain.md section 1 (+ nlohmann-json, scikit-image for the
 # SSIM reference script and python3-sklearn for bench/peer_sklearn.sh (issue 24), GoogleTest / Google Benchmark; headless EGL + GLES on Mesa's llvmpipe and
 # glslang for the export checks, toolchain.md section 7; pybind11 and pytest for the Python module;
-# cpp-httplib for `btfc view` and chromium for the web viewer's browser test, issue 21).
+# cpp-httplib for `btfc view` and chromium for the web viewer's browser test, issue 21; clang-14
+# with libFuzzer and the sanitizer runtimes, and clang's OpenMP, for the ASan + UBSan pass and the
+# fuzz smoke of scripts/test.sh (issue 25); ccache, so the second build tree and re-runs
+# recompile only what changed).
 set -euo pipefail
 PACKAGES=(
   build-essential cmake
@@ -16,6 +19,7 @@ PACKAGES=(
   libopenmpi-dev openmpi-bin
   libegl-mesa0 libgl1-mesa-dri libegl-dev libgles-dev glslang-tools
   libcpp-httplib-dev chromium
+  clang-14 libclang-rt-14-dev libomp-14-dev ccache
 )
 missing=()
 for p in "${PACKAGES[@]}"; do

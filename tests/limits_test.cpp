@@ -56,7 +56,7 @@ TEST(Limits, EnvironmentSetsTheLimitAndBadValuesAreIgnored) {
   EXPECT_EQ(memory_limit(), size_t(3) << 20);
   setenv("BTFC_MAX_MEMORY", "lots", 1);
   set_memory_limit(0);
-  EXPECT_EQ(memory_limit(), k_default_memory_limit);
+  EXPECT_EQ(memory_limit(), default_memory_limit());
   set_memory_limit(12345);
   EXPECT_EQ(memory_limit(), 12345u);
 }

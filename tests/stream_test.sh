@@ -8,6 +8,9 @@ W=$1
 rm -rf "$W" && mkdir -p "$W"
 fails=0
 source "$(dirname "$0")/cli_lib.sh"  # check, expect_grep
+# Under AddressSanitizer (scripts/test-sanitize.sh) the peak-RSS bounds cannot hold: its shadow
+# memory and quarantine add to every process. Everything else is checked as usual.
+[ "${BTFC_SANITIZER:-0}" = 1 ] && echo "note: peak-RSS bounds skipped under the sanitizer (BTFC_SANITIZER=1)"
 
 # 56 x 56 texels x 81 x 81 x RGB = 61.7 M values = 247 MB as float32; limit 40 MiB.
 SPEC=fmf:rank=16:oversample=8:power_iters=2
@@ -24,7 +27,8 @@ cp "$W/out.txt" "$W/cmp_ooc.json"
 # process start, mostly OpenImageIO's shared libraries, plus thread stacks and BLAS buffers).
 # In core the same run needs the 247 MB input on top of the start-up 135 MiB.
 python3 - "$W" <<'PY' || fails=$((fails + 1))
-import json, sys
+import json, os, sys
+SAN = os.environ.get("BTFC_SANITIZER") == "1"  # ASan shadow memory and quarantine: no RSS bound holds
 w = sys.argv[1]
 r = json.load(open(w + "/ooc.json"))
 o = r["out_of_core"]
@@ -32,7 +36,7 @@ assert o["passes"] == 4, o                      # power_iters + 2
 assert o["work_file_built"] and o["chunks"] >= 2, o
 assert o["bytes_read"] == 4 * 56 * 56 * 19683 * 2, o   # 4 passes over the half working file
 limit, overhead = 40 << 20, 200 << 20
-assert o["peak_rss_bytes"] <= limit + overhead, (o["peak_rss_bytes"], limit + overhead)
+assert SAN or o["peak_rss_bytes"] <= limit + overhead, (o["peak_rss_bytes"], limit + overhead)
 a = json.load(open(w + "/cmp_in.json"))["rel_l2"]; b = json.load(open(w + "/cmp_ooc.json"))["rel_l2"]
 assert 1e-3 < a < 0.5, a
 assert abs(a - b) / a < 0.01, (a, b)
@@ -46,12 +50,13 @@ cp "$W/out.txt" "$W/ooc_raw.json"
 check cmp-ooc-raw 0 "$BTFC" --json compare --no-ssim "$W/s.btfc" "$W/ooc_raw.btfc"
 cp "$W/out.txt" "$W/cmp_ooc_raw.json"
 python3 - "$W" <<'PY' || fails=$((fails + 1))
-import json, sys
+import json, os, sys
+SAN = os.environ.get("BTFC_SANITIZER") == "1"  # ASan shadow memory and quarantine: no RSS bound holds
 w = sys.argv[1]
 o = json.load(open(w + "/ooc_raw.json"))["out_of_core"]
 assert not o["work_file_built"] and "in place" in o["work_file_note"] and o["chunks"] >= 2, o
 assert o["bytes_read"] == 4 * 56 * 56 * 19683 * 4, o   # 4 passes over the float tensor
-assert o["peak_rss_bytes"] <= (80 << 20) + (200 << 20), o["peak_rss_bytes"]
+assert SAN or o["peak_rss_bytes"] <= (80 << 20) + (200 << 20), o["peak_rss_bytes"]
 a = json.load(open(w + "/cmp_in.json"))["rel_l2"]; b = json.load(open(w + "/cmp_ooc_raw.json"))["rel_l2"]
 assert abs(a - b) / a < 0.01, (a, b)
 print("ok   ooc-raw-in-place rel_l2 %.6f vs in core %.6f, peak RSS %.1f MiB" % (b, a, o["peak_rss_bytes"] / 2**20))
@@ -107,12 +112,13 @@ DSPEC=fmf:color=dfmf:rank=12:chroma_rank=6:oversample=8:power_iters=2:svd=random
 check synth-32 0 "$BTFC" synth --width 32 --height 32 --seed 5 -o "$W/s32.btfc"
 in_and_out_of_core dfmf "$W/s32.btfc" $DSPEC 30M
 python3 - "$W" <<'PY' || fails=$((fails + 1))
-import json, sys
+import json, os, sys
+SAN = os.environ.get("BTFC_SANITIZER") == "1"  # ASan shadow memory and quarantine: no RSS bound holds
 w = sys.argv[1]
 r = json.load(open(w + "/dfmf.ooc.json")); o = r["out_of_core"]; st = r["stats"]
 assert o["passes"] == 12 and o["work_file_built"] and o["chunks"] >= 2, o   # 3 x (power_iters + 2)
 assert o["bytes_read"] == 12 * 32 * 32 * 19683 * 2, o
-assert o["peak_rss_bytes"] <= (30 << 20) + (200 << 20), o["peak_rss_bytes"]
+assert SAN or o["peak_rss_bytes"] <= (30 << 20) + (200 << 20), o["peak_rss_bytes"]
 assert st["rank.y"] == 12 and st["rank.u"] == 6 and "negative_luminance_clamped" in st, st
 a = json.load(open(w + "/dfmf.cmp_in.json"))["rel_l2"]; b = json.load(open(w + "/out.txt"))["rel_l2"]
 assert 1e-3 < a < 0.9 and abs(a - b) / a < 0.01, (a, b)
@@ -124,11 +130,12 @@ PY
 check synth-1view 0 "$BTFC" synth --width 256 --height 128 --views 30,0 --seed 3 -o "$W/v1.btfc"
 in_and_out_of_core exact "$W/v1.btfc" fmf:rank=16:svd=exact 30M
 python3 - "$W" <<'PY' || fails=$((fails + 1))
-import json, sys
+import json, os, sys
+SAN = os.environ.get("BTFC_SANITIZER") == "1"  # ASan shadow memory and quarantine: no RSS bound holds
 w = sys.argv[1]
 r = json.load(open(w + "/exact.ooc.json")); o = r["out_of_core"]
 assert o["passes"] == 2 and o["chunks"] >= 2 and r["stats"]["svd.rgb"] == "exact (streamed)", r
-assert o["peak_rss_bytes"] <= (30 << 20) + (200 << 20), o["peak_rss_bytes"]
+assert SAN or o["peak_rss_bytes"] <= (30 << 20) + (200 << 20), o["peak_rss_bytes"]
 a = json.load(open(w + "/exact.cmp_in.json"))["rel_l2"]; b = json.load(open(w + "/out.txt"))["rel_l2"]
 assert 1e-3 < a < 0.5 and abs(a - b) / a < 1e-4, (a, b)   # the same factorization (half rounding of the working file aside)
 print("ok   exact-ooc-vs-in-core rel_l2 %.7f vs %.7f in 2 passes" % (b, a))
@@ -136,7 +143,7 @@ PY
 # Its model (32 MB decoded) decompressed to an image set within 8 MiB: written in parts (groups of
 # lights), the same images as an in-memory decompress, and the set appears only when complete.
 check decompress-images 0 "$BTFC" --device cpu --json decompress "$W/exact.ooc.btfc" -o "$W/img_streamed" --max-memory 8M
-python3 -c "import json; m=json.load(open('$W/out.txt')); assert m['format'] == 'image set' and m['peak_rss_bytes'] <= (8 << 20) + (200 << 20), m; print('ok   images-streamed peak RSS %.1f MiB' % (m['peak_rss_bytes'] / 2**20))" || fails=$((fails + 1))
+python3 -c "import json, os; m=json.load(open('$W/out.txt')); assert m['format'] == 'image set' and (os.environ.get('BTFC_SANITIZER') == '1' or m['peak_rss_bytes'] <= (8 << 20) + (200 << 20)), m; print('ok   images-streamed peak RSS %.1f MiB' % (m['peak_rss_bytes'] / 2**20))" || fails=$((fails + 1))
 check decompress-images-in-memory 0 "$BTFC" --device cpu -q decompress "$W/exact.ooc.btfc" -o "$W/img_whole"
 check cmp-images 0 "$BTFC" --json compare --no-ssim "$W/img_whole" "$W/img_streamed"
 python3 -c "import json; m=json.load(open('$W/out.txt')); assert m['rel_l2'] == 0, m; print('ok   images-streamed-identical')" || fails=$((fails + 1))
@@ -176,7 +183,7 @@ check decompress-bdi 0 "$BTFC" --json decompress "$W/ooc.btfc" -o "$W/d.btf" --m
 check cmp-bdi 0 "$BTFC" --json compare --no-ssim "$W/ooc.btfc" "$W/d.btf"
 python3 -c "import json; m=json.load(open('$W/out.txt')); assert m['rel_l2'] < 2e-3, m; print('ok   bdi-decoded', m['rel_l2'])" || fails=$((fails + 1))
 check decompress-btfc 0 "$BTFC" --device cpu --json decompress "$W/ooc.btfc" -o "$W/d2.btfc" --max-memory 8M
-python3 -c "import json; m=json.load(open('$W/out.txt')); assert m['format'] == 'raw .btfc' and m['peak_rss_bytes'] <= (8 << 20) + (200 << 20), m; print('ok   btfc-streamed peak RSS %.1f MiB' % (m['peak_rss_bytes'] / 2**20))" || fails=$((fails + 1))
+python3 -c "import json, os; m=json.load(open('$W/out.txt')); assert m['format'] == 'raw .btfc' and (os.environ.get('BTFC_SANITIZER') == '1' or m['peak_rss_bytes'] <= (8 << 20) + (200 << 20)), m; print('ok   btfc-streamed peak RSS %.1f MiB' % (m['peak_rss_bytes'] / 2**20))" || fails=$((fails + 1))
 check decompress-btfc-in-memory 0 "$BTFC" --device cpu -q decompress "$W/ooc.btfc" -o "$W/d3.btfc"
 cmp -s "$W/d2.btfc" "$W/d3.btfc" && echo "ok   btfc-streamed-identical" || { echo "FAIL btfc-streamed-identical"; fails=$((fails + 1)); }
 check decompress-btfc-verify 0 "$BTFC" info --verify "$W/d2.btfc"

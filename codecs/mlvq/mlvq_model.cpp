@@ -506,11 +506,13 @@ Result<std::unique_ptr<Model>> MlvqModel::load(const ContainerReader& rd, const 
   };
   auto read_scales = [&](const std::string& name, size_t count, std::vector<uint16_t>& codes, std::vector<float>& v, float& lo,
                          float& hi) -> Status {
-    codes.resize(count);
-    v.resize(count);
+    // The arrays are sized only after the tensor's shape was checked against `count`: the count
+    // comes from DESC (texels), and a file declaring 2^30 texels must not allocate for them.
     const TensorInfo* ti = rd.find(name + ".scale");
     if (ti && ti->dtype == DType::zq) {  // version 2: the codes zstd-coded (scale_tensor)
       BTFC_ASSIGN_OR_RETURN(std::vector<float> f, rd.read_floats(name + ".scale", {uint64_t(count), 1}));
+      codes.resize(count);
+      v.resize(count);
       const float top = float((1u << h.scale_bits) - 1);
       for (size_t i = 0; i < count; ++i) {
         if (!(f[i] >= 0 && f[i] <= top && f[i] == std::floor(f[i]))) return bad("tensor '" + name + ".scale' holds a code outside 0.." + std::to_string(int(top)));
@@ -518,6 +520,8 @@ Result<std::unique_ptr<Model>> MlvqModel::load(const ContainerReader& rd, const 
       }
     } else {
       BTFC_ASSIGN_OR_RETURN(Tensor t, rd.read_checked(name + ".scale", h.scale_bits == 8 ? DType::u8 : DType::u16, {uint64_t(count)}));
+      codes.resize(count);
+      v.resize(count);
       for (size_t i = 0; i < count; ++i) {
         codes[i] = h.scale_bits == 8 ? t.bytes[i] : uint16_t(t.bytes[2 * i] | (t.bytes[2 * i + 1] << 8));
         if (codes[i] >= (1u << h.scale_bits)) return bad("tensor '" + name + ".scale' holds a code above " + std::to_string((1u << h.scale_bits) - 1));

@@ -5,6 +5,7 @@
 #include <sys/mman.h>
 #include <unistd.h>
 #if defined(__x86_64__)
+#include <cpuid.h>
 #include <immintrin.h>
 #endif
 
@@ -27,7 +28,13 @@ namespace {
 // the hardware conversion: software half rounding is several times slower per value. Both paths
 // round to nearest even, so they give the same bits.
 bool cpu_has_f16c() {
+#if defined(__clang__)
+  // clang 14's __builtin_cpu_supports does not know "f16c": CPUID leaf 1, ECX bit 29.
+  unsigned a = 0, b = 0, c = 0, d = 0;
+  static const bool yes = __builtin_cpu_supports("avx") && __get_cpuid(1, &a, &b, &c, &d) && (c & bit_F16C) != 0;
+#else
   static const bool yes = __builtin_cpu_supports("avx") && __builtin_cpu_supports("f16c");
+#endif
   return yes;
 }
 
