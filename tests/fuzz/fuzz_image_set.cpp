@@ -32,23 +32,14 @@ namespace fs = std::filesystem;
 
 namespace {
 
-std::string g_root;  // the process's scratch folder; each input gets g_root/set
-
-void remove_root() {
-  std::error_code ec;
-  if (!g_root.empty()) fs::remove_all(g_root, ec);
-}
+std::string g_base;  // /dev/shm, else $TMPDIR, else /tmp
 
 }  // namespace
 
 extern "C" int LLVMFuzzerInitialize(int*, char***) {
   fuzz::init_process();
   const char* shm = "/dev/shm";
-  std::string base = fs::is_directory(shm) ? shm : (std::getenv("TMPDIR") ? std::getenv("TMPDIR") : "/tmp");
-  std::string tmpl = base + "/btfc-fuzz-imageset-XXXXXX";
-  if (!mkdtemp(tmpl.data())) std::abort();
-  g_root = tmpl;
-  std::atexit(remove_root);
+  g_base = fs::is_directory(shm) ? shm : (std::getenv("TMPDIR") ? std::getenv("TMPDIR") : "/tmp");
   // Without the OpenImageIO plugin every input would fail the same way: say so, do not fuzz.
   if (image_file::plugin_path().empty()) {
     std::fprintf(stderr, "fuzz_image_set: libbtfc_imageio.so cannot be loaded (BTFC_IMAGEIO_PLUGIN)\n");
@@ -59,11 +50,11 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (size < 1) return 0;
-  const std::string dir = g_root + "/set";
+  // A fresh directory per input, removed at the end: libFuzzer's exits skip atexit handlers, so
+  // nothing is left behind but the directory of an input that crashed.
+  std::string dir = g_base + "/btfc-fuzz-imageset-XXXXXX";
+  if (!mkdtemp(dir.data())) std::abort();
   std::error_code ec;
-  fs::remove_all(dir, ec);
-  fs::create_directory(dir, ec);
-  if (ec) std::abort();
   const uint8_t flags = fuzz::write_image_set_entries(data, size, dir);
   set_allow_partial_image_sets((flags & 1) != 0);
   (void)is_image_set(dir);
