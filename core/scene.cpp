@@ -28,6 +28,9 @@ Status check_keys(const nlohmann::json& o, std::initializer_list<const char*> al
 Result<Cone> parse_cone(const nlohmann::json& c, const std::string& where) {
   BTFC_RETURN_IF_ERROR(check_keys(c, {"theta", "phi", "angle"}, where));
   if (!c.contains("angle") || !c["angle"].is_number()) return invalid_argument(where + ": 'angle' (degrees) is required");
+  // json::value() throws on a key of another type ("theta": "x"): check the types first.
+  for (const char* k : {"theta", "phi"})
+    if (c.contains(k) && !c[k].is_number()) return invalid_argument(where + ": '" + k + "' must be a number (degrees)");
   const double th = c.value("theta", 0.0), ph = c.value("phi", 0.0), an = c["angle"].get<double>();
   if (!(th >= 0 && th <= 90) || !(an > 0 && an <= 180) || !std::isfinite(ph))
     return invalid_argument(where + ": theta must be in [0, 90], angle in (0, 180]");
@@ -39,7 +42,9 @@ Result<Cone> parse_cone(const nlohmann::json& c, const std::string& where) {
 
 }  // namespace
 
-Result<SceneMaterial> parse_scene(const std::string& text, const std::string& what, const std::string& material) {
+namespace {
+
+Result<SceneMaterial> parse_scene_json(const std::string& text, const std::string& what, const std::string& material) {
   nlohmann::json j;
   try {
     j = nlohmann::json::parse(text);
@@ -54,6 +59,7 @@ Result<SceneMaterial> parse_scene(const std::string& text, const std::string& wh
     const std::string where = what + ": materials[" + std::to_string(i) + "]";
     BTFC_RETURN_IF_ERROR(check_keys(m, {"name", "footprint", "light_cone", "view_cone", "gpu_budget"}, where));
     SceneMaterial s;
+    if (m.contains("name") && !m["name"].is_string()) return invalid_argument(where + ": 'name' must be a string");
     s.name = m.value("name", "");
     if (!material.empty() && s.name != material) continue;
     if (m.contains("footprint")) {
@@ -82,6 +88,18 @@ Result<SceneMaterial> parse_scene(const std::string& text, const std::string& wh
     return s;
   }
   return invalid_argument(what + ": no material named '" + material + "'");
+}
+
+}  // namespace
+
+Result<SceneMaterial> parse_scene(const std::string& text, const std::string& what, const std::string& material) {
+  // The checks above look at every type before reading a value; this catches any they miss (a
+  // nlohmann::json type_error escaping would end the process instead of naming the file).
+  try {
+    return parse_scene_json(text, what, material);
+  } catch (const nlohmann::json::exception& e) {
+    return invalid_argument(what + ": " + e.what());
+  }
 }
 
 Result<SceneMaterial> read_scene(const std::string& path, const std::string& material) {

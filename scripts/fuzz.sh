@@ -3,17 +3,48 @@
 # and runs each for SECONDS (default 60), one after another, niced, on one thread. A benchmark-
 # style script, not part of CI. Prints per target: executions, exec/s, corpus size (files and
 # coverage features) and findings (crash-*, leak-*, oom-*, timeout-* artifacts), and writes the
-# table to build-fuzz/fuzz-report.txt. Exit status 1 when any target found something.
+# table to BUILD/fuzz-report.txt. Exit status 1 when any target found something.
 #
 # Usage: scripts/fuzz.sh [SECONDS] [TARGET...]      e.g. scripts/fuzz.sh 600
-#        targets: fuzz_container fuzz_model_load fuzz_bonn fuzz_image_name fuzz_spec
-# A finding is reproduced with: build-fuzz/tests/fuzz/<target> build-fuzz/artifacts/<target>/crash-...
+#        scripts/fuzz.sh --runs [N] [TARGET...]      smoke: a fixed number of executions
+# Targets: every line of tests/fuzz/targets.txt (the one list; CMake reads it too).
+# Smoke mode (--runs) runs each target for N executions (libFuzzer -runs=N; without N, the
+# target's smoke=N from targets.txt, chosen so that all targets take about a minute here) over
+# its committed corpus and the golden seeds, with a scratch corpus in BUILD/smoke/<target> that
+# is emptied first: nothing is added to tests/fuzz/corpus/ or to BUILD/corpus/.
+# BUILD is $BTFC_FUZZ_BUILD_DIR (default build-fuzz). A missing BUILD is configured for fuzzing;
+# an existing one is used as it is (never reconfigured; it must have -DBTFC_FUZZ=ON, e.g. a
+# sanitizer build with tests), and the targets are built there if needed.
+# A finding is reproduced with: BUILD/tests/fuzz/<target> BUILD/artifacts/<target>/crash-...
 set -euo pipefail
 cd "$(dirname "$0")/.."
-SECONDS_PER=${1:-60}
-shift || true
+TARGET_LIST=tests/fuzz/targets.txt
+RUNS=""
+SECONDS_PER=60
+if [ "${1:-}" = --runs ]; then
+  shift
+  RUNS=default
+  if [[ "${1:-}" =~ ^[0-9]+$ ]]; then RUNS=$1; shift; fi
+elif [[ "${1:-}" =~ ^[0-9]+$ ]]; then
+  SECONDS_PER=$1
+  shift
+fi
 TARGETS=("$@")
-[ ${#TARGETS[@]} -eq 0 ] && TARGETS=(fuzz_container fuzz_model_load fuzz_bonn fuzz_image_name fuzz_spec)
+[ ${#TARGETS[@]} -eq 0 ] && mapfile -t TARGETS < <(awk '/^[a-z]/ {print $1}' "$TARGET_LIST")
+for t in "${TARGETS[@]}"; do
+  awk '/^[a-z]/ {print $1}' "$TARGET_LIST" | grep -qx "$t" || { echo "fuzz.sh: unknown target '$t' (see $TARGET_LIST)" >&2; exit 2; }
+done
+# The smoke runs of a target: N, or its smoke=N in targets.txt (1000 when it has none).
+smoke_runs() {
+  if [ "$RUNS" != default ]; then echo "$RUNS"; return; fi
+  local n
+  n=$(awk -v t="$1" '$1 == t { for (i = 2; i <= NF; ++i) if ($i ~ /^smoke=/) { sub(/^smoke=/, "", $i); print $i } }' "$TARGET_LIST")
+  echo "${n:-1000}"
+}
+# The target's own libFuzzer options in targets.txt (words starting with '-').
+target_opts() {
+  awk -v t="$1" '$1 == t { for (i = 2; i <= NF; ++i) if ($i ~ /^-/) print $i }' "$TARGET_LIST"
+}
 
 scripts/setup.sh
 # Fuzz-only packages: clang with libFuzzer and the sanitizer runtimes, and clang's OpenMP.
@@ -37,6 +68,10 @@ if [ ! -f "$B/CMakeCache.txt" ]; then
     -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -gline-tables-only" -DCMAKE_C_FLAGS_RELWITHDEBINFO="-O1 -gline-tables-only" \
     -DBTFC_BUILD_TESTS=OFF -DBTFC_BUILD_BENCH=OFF >/dev/null
 fi
+if ! grep -q '^BTFC_FUZZ:BOOL=ON' "$B/CMakeCache.txt"; then
+  echo "fuzz.sh: $B is not configured with -DBTFC_FUZZ=ON (set BTFC_FUZZ_BUILD_DIR to a fuzz build, or remove $B)" >&2
+  exit 2
+fi
 nice -n 10 cmake --build "$B" -j 2 --target "${TARGETS[@]}"
 
 export ASAN_OPTIONS=detect_leaks=1:allocator_may_return_null=1
@@ -44,10 +79,15 @@ export LSAN_OPTIONS=suppressions=$PWD/tests/lsan.supp
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 export OMP_NUM_THREADS=1 BTFC_FORCE_CPU=1
 REPORT="$B/fuzz-report.txt"
-printf "%-16s %8s %12s %9s %8s %8s %9s\n" target seconds executions exec/s corpus features findings | tee "$REPORT"
+[ -n "$RUNS" ] && REPORT="$B/fuzz-smoke-report.txt"
+printf "%-18s %8s %12s %9s %8s %8s %9s\n" target seconds executions exec/s corpus features findings | tee "$REPORT"
 status=0
 for t in "${TARGETS[@]}"; do
   work="$B/corpus/$t" art="$B/artifacts/$t"
+  if [ -n "$RUNS" ]; then
+    work="$B/smoke/$t" art="$B/smoke-artifacts/$t"
+    rm -rf "$work" "$art"
+  fi
   mkdir -p "$work" "$art"
   seeds=("tests/fuzz/corpus/$t")
   # Every golden model (one per codec, tests/golden/) seeds the container and loader targets, so
@@ -63,10 +103,18 @@ for t in "${TARGETS[@]}"; do
     seeds+=("$B/corpus/golden_models")
   fi
   log="$B/fuzz-$t.log"
+  [ -n "$RUNS" ] && log="$B/smoke-$t.log"
   rc=0
-  nice -n 10 "$B/tests/fuzz/$t" -max_total_time="$SECONDS_PER" -print_final_stats=1 -timeout=20 \
-    -rss_limit_mb=2048 -malloc_limit_mb=512 -max_len=65536 -artifact_prefix="$art/" \
+  if [ -n "$RUNS" ]; then
+    limit=(-runs="$(smoke_runs "$t")" -max_total_time=600)
+  else
+    limit=(-max_total_time="$SECONDS_PER")
+  fi
+  start=$EPOCHREALTIME
+  nice -n 10 "$B/tests/fuzz/$t" "${limit[@]}" -print_final_stats=1 -timeout=20 \
+    -rss_limit_mb=2048 -malloc_limit_mb=512 -max_len=65536 -artifact_prefix="$art/" $(target_opts "$t") \
     "$work" "${seeds[@]}" >"$log" 2>&1 || rc=$?
+  secs=$(awk -v a="$start" -v b="$EPOCHREALTIME" 'BEGIN { printf "%.0f", b - a }')
   execs=$(grep 'stat::number_of_executed_units:' "$log" | awk '{print $2}' | tail -1)
   rate=$(grep 'stat::average_exec_per_sec:' "$log" | awk '{print $2}' | tail -1)
   last=$(grep -E '^#[0-9]+' "$log" | tail -1)
@@ -74,7 +122,7 @@ for t in "${TARGETS[@]}"; do
   feats=$(echo "$last" | grep -o 'ft: [0-9]*' | awk '{print $2}')
   found=$(find "$art" -type f \( -name 'crash-*' -o -name 'leak-*' -o -name 'oom-*' -o -name 'timeout-*' \) | wc -l)
   [ "$rc" -ne 0 ] && [ "$found" -eq 0 ] && found="rc=$rc"
-  printf "%-16s %8s %12s %9s %8s %8s %9s\n" "$t" "$SECONDS_PER" "${execs:-?}" "${rate:-?}" "${files:-?}" "${feats:-?}" "$found" | tee -a "$REPORT"
+  printf "%-18s %8s %12s %9s %8s %8s %9s\n" "$t" "$secs" "${execs:-?}" "${rate:-?}" "${files:-?}" "${feats:-?}" "$found" | tee -a "$REPORT"
   if [ "$found" != 0 ]; then
     status=1
     grep -E 'ERROR: |SUMMARY: |runtime error' "$log" | head -5 | sed 's/^/    /'

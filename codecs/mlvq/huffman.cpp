@@ -9,6 +9,7 @@
 #include <queue>
 
 #include "codecs/mlvq/mlvq_internal.h"
+#include "core/limits.h"
 
 namespace btfc::mlvq {
 
@@ -148,11 +149,16 @@ Result<std::vector<uint32_t>> decode_indices(std::span<const uint8_t> bytes, siz
   auto bad = [&](const std::string& m) { return corrupt_data(what + ": " + m); };
   if (bytes.empty()) return bad("empty index stream");
   if (alphabet == 0) return bad("index stream into an empty codebook");
-  std::vector<uint32_t> v(count);
+  // Nothing is sized by `count` (up to 2^28 x 64 from a model file) before the stream is known to
+  // hold that many indices: plain ones take exactly w bits each, Huffman codes at least 1 bit.
+  if (uint64_t(count) > (uint64_t(1) << 40)) return bad(std::to_string(count) + " indices declared");
   BitReader br(bytes.subspan(1));
   if (bytes[0] == 0) {
     const int w = plain_bits(alphabet);
     if ((uint64_t(count) * uint64_t(w) + 7) / 8 != bytes.size() - 1) return bad("plain index stream has " + std::to_string(bytes.size() - 1) + " bytes, expected " + std::to_string((uint64_t(count) * uint64_t(w) + 7) / 8));
+    // A 1-entry codebook stores 0 bits per index, so only the memory limit bounds the count.
+    if (w == 0) BTFC_RETURN_IF_ERROR(check_memory(count * sizeof(uint32_t), what + ": " + std::to_string(count) + " indices"));
+    std::vector<uint32_t> v(count);
     for (size_t i = 0; i < count; ++i) {
       uint64_t x;
       if (!br.get(w, x)) return bad("truncated plain index stream");
@@ -177,6 +183,10 @@ Result<std::vector<uint32_t>> decode_indices(std::span<const uint8_t> bytes, siz
   uint64_t kraft = 0;
   for (int l = 1; l <= k_max_len; ++l) kraft += uint64_t(count_len[l]) << (k_max_len - l);
   if (kraft == 0 || kraft > (uint64_t(1) << k_max_len)) return bad("invalid Huffman code table");
+  const uint64_t code_bits = (uint64_t(bytes.size()) - 1) * 8 - uint64_t(alphabet) * k_len_bits;
+  if (uint64_t(count) > code_bits)
+    return bad("truncated Huffman index stream: " + std::to_string(count) + " indices in " + std::to_string(code_bits) + " bits of codes");
+  std::vector<uint32_t> v(count);
   // Canonical decoding tables: per length the first code, its count and the symbol offset.
   std::vector<uint32_t> sorted;
   sorted.reserve(alphabet);

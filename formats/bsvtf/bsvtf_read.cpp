@@ -13,6 +13,8 @@
 
 #include "formats/bsvtf/bsvtf.h"
 
+#include "core/limits.h"
+
 namespace btfc {
 namespace {
 
@@ -162,6 +164,10 @@ Result<BsvtfReader> BsvtfReader::open(const std::string& path) {
     const uint64_t raw_min = kind == BsvtfEntry::packet ? uint64_t(r.m_blocks[x.block].rows) * comps * 2 : r.m_geo.tile_floats();
     const uint64_t raw_max = kind == BsvtfEntry::packet ? raw_min : r.m_geo.max_raw_tile_bytes();
     if (x.raw < raw_min || x.raw > raw_max) return bad(where + "raw size " + std::to_string(x.raw) + " impossible for its kind");
+    // zlib inflates at most 1032:1, so the stored bytes bound what a payload decodes to, and with
+    // them everything decoding sizes from the geometry: the file must hold its tiles.
+    if (uint64_t(x.raw) > uint64_t(x.stored) * 1032)
+      return bad(where + "raw size " + std::to_string(x.raw) + " cannot inflate from " + std::to_string(x.stored) + " stored bytes (deflate: at most 1032:1)");
     if (!(std::isfinite(x.weight) && x.weight >= 0)) return bad(where + "weight is not a non-negative number");
     offset += x.stored;
     return {};
@@ -225,6 +231,7 @@ Result<std::vector<std::vector<float>>> BsvtfReader::decode_texture(size_t t) co
   for (int l = 0; l < m_geo.levels; ++l) {
     const size_t n = m_geo.tiles_in_level(l);
     const int txn = m_geo.tiles_x(l);
+    BTFC_RETURN_IF_ERROR(check_memory(n * tf * sizeof(float), m_path + ": level " + std::to_string(l) + " of texture " + std::to_string(t)));
     levels[size_t(l)].assign(n * tf, 0.0f);
     std::vector<Status> st(n);
 #pragma omp parallel for schedule(dynamic)
@@ -243,6 +250,7 @@ Result<std::vector<float>> BsvtfReader::decode_eigen_textures(int b) const {
   const Geometry& g = m_geo;
   const size_t C = m_blocks[size_t(b)].components, tf = g.tile_floats();
   const int L = g.finest(), d = g.dim(), T = g.tile, B = g.border;
+  BTFC_RETURN_IF_ERROR(check_memory(size_t(g.width) * size_t(g.height) * C * sizeof(float), m_path + ": eigen-textures of block " + std::to_string(b)));
   std::vector<float> out(size_t(g.width) * size_t(g.height) * C);
   for (size_t t = 0; t < textures(); ++t) {
     if (m_texture_block[t] != b) continue;

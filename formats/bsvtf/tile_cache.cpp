@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 
+#include "core/limits.h"
 #include "core/metrics.h"
 
 namespace btfc {
@@ -17,6 +18,8 @@ Result<TileCacheSim> TileCacheSim::make(const BsvtfReader& f) {
   s.m_textures = f.textures(), s.m_per_texture = g.tiles_total();
   for (int l = 0, base = 0; l < g.levels; base += int(g.tiles_in_level(l)), ++l) s.m_level_base.push_back(size_t(base));
   const size_t n = s.tiles(), tf = g.tile_floats();
+  // Every decoded tile is held (tile_cache.h "Memory"): checked before decoding any.
+  BTFC_RETURN_IF_ERROR(check_memory(n * tf * sizeof(float), f.path() + ": tile cache of " + std::to_string(n) + " decoded tiles"));
   s.m_weight.resize(n), s.m_energy.resize(n), s.m_bytes.resize(n);
   for (size_t t = 0; t < s.m_textures; ++t) {
     BTFC_ASSIGN_OR_RETURN(auto levels, f.decode_texture(t));

@@ -49,3 +49,33 @@ write("handmade_tensor_dims_overflow.btfc", chunk(b"DESC", desc(2, 2, 3, 1, 1)),
 # from the claimed rank.
 write("handmade_fmf_huge_rank.btfc", chunk(b"DESC", desc(2, 2, 3, 1, 1)),
       chunk(b"CODC", codc("fmf", 1, "fmf:rank=32")), chunk(b"TNSR", tensor("U.rgb", 1, [3, 1 << 31], b"")))
+
+# A BSVTF streaming file (docs/FORMAT.md "BSVTF") of 8192 x 8192 texels in 1024-texel tiles with
+# 64-texel borders (4 levels, 85 tiles) whose 86 payloads are all empty: 3.8 KB that declare
+# 1 GiB of eigen-textures and 5 MB of coefficients per tile. Every CRC is valid; the reader must
+# refuse raw sizes that no deflate stream of the stored size can produce, before anyone sizes a
+# buffer from the geometry.
+def bsvtf_huge_geometry():
+    w = h = 8192
+    tile, border, comps, levels, nl, nv, nb, C = 1024, 64, 4, 4, 1, 1, 1, 4
+    dim = tile + 2 * border
+    tf = comps * dim * dim
+    tiles = [(0, 0, 0)] + [(l, tx, ty) for l in range(1, levels) for ty in range(1 << l) for tx in range(1 << l)]
+    entries = 1 + len(tiles)
+    hb = 80 + 12 * (nl + nv) + 280 * nb + 8
+    data_off = hb + 40 * entries
+    d = b""
+    d += struct.pack("<BBHIIIQIIfI", 1, 0, 0, 0, 0, 0, data_off, 0, nl * nv * comps * 2, 0.0, 0)  # the packet
+    for l, tx, ty in tiles:
+        d += struct.pack("<BBHIIIQIIfI", 2, l, 0, 0, tx, ty, data_off, 0, tf, 1.0, 0)
+    head = b"BSVTF\r\n\x1a" + struct.pack("<HHIIIIIIIIIIIIIQQ", 1, 0, hb, w, h, tile, border, comps, levels, 95, 0, 1,
+                                          nl, nv, nb, entries, 0)
+    head += struct.pack("<3f", 0, 0, 1) * (nl + nv)
+    head += b"rgb\0\0\0\0\0" + struct.pack("<IIIf", nl * nv, C, 1, 1.0) + struct.pack("<64f", *([0.5] * 64))
+    head += struct.pack("<I", zlib.crc32(d))
+    head += struct.pack("<I", zlib.crc32(head))
+    assert len(head) == hb
+    with open(os.path.join(HERE, "handmade_bsvtf_huge_geometry.bsvtf"), "wb") as f:
+        f.write(head + d)
+
+bsvtf_huge_geometry()
