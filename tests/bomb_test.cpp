@@ -26,6 +26,7 @@
 #include "core/container.h"
 #include "core/limits.h"
 #include "core/sysinfo.h"
+#include "tests/test_paths.h"
 
 using namespace btfc;
 

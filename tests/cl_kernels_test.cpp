@@ -25,6 +25,7 @@
 #include "codecs/lpyr/lpyr_internal.h"
 #include "core/cl_runtime.h"
 #include "core/synth.h"
+#include "tests/test_paths.h"
 
 using namespace btfc;
 

@@ -14,6 +14,7 @@
 #include "codecs/fmf/fmf_cl.h"
 #include "core/cl_runtime.h"
 #include "core/synth.h"
+#include "tests/test_paths.h"
 
 using namespace btfc;
 

@@ -16,6 +16,7 @@
 #include "core/container.h"
 #include "formats/bonn/bonn_btf.h"
 #include "tests/fuzz/fuzz_util.h"
+#include "tests/test_paths.h"
 
 using namespace btfc;
 namespace fs = std::filesystem;

@@ -19,6 +19,7 @@
 #include "core/scene.h"
 #include "formats/bsvtf/bsvtf.h"
 #include "formats/bsvtf/tile_cache.h"
+#include "tests/test_paths.h"
 
 using namespace btfc;
 namespace fs = std::filesystem;

@@ -14,6 +14,7 @@
 #include "codecs/codec.h"
 #include "core/cl_runtime.h"
 #include "core/container.h"
+#include "tests/test_paths.h"
 
 using namespace btfc;
 

@@ -8,6 +8,7 @@
 #include <iterator>
 
 #include "formats/image_set.h"
+#include "tests/test_paths.h"
 
 namespace fs = std::filesystem;
 

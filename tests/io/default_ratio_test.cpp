@@ -13,6 +13,7 @@
 #include "codecs/codec.h"
 #include "core/synth.h"
 #include "formats/image_set.h"
+#include "tests/test_paths.h"
 
 using namespace btfc;
 

@@ -10,6 +10,7 @@
 
 #include "codecs/codec.h"
 #include "formats/image_set.h"
+#include "tests/test_paths.h"
 
 namespace btfc {
 namespace {

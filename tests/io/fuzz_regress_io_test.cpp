@@ -13,6 +13,7 @@
 
 #include "formats/image_set.h"
 #include "tests/fuzz/image_set_input.h"
+#include "tests/test_paths.h"
 
 using namespace btfc;
 namespace fs = std::filesystem;

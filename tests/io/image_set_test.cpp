@@ -10,6 +10,7 @@
 #include <cmath>
 #include <filesystem>
 #include <random>
+#include "tests/test_paths.h"
 
 namespace btfc {
 namespace {

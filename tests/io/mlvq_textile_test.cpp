@@ -13,6 +13,7 @@
 #include "codecs/mlvq/mlvq_internal.h"
 #include "core/metrics.h"
 #include "formats/image_set.h"
+#include "tests/test_paths.h"
 
 using namespace btfc;
 

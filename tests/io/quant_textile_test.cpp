@@ -6,6 +6,7 @@
 #include "codecs/codec.h"
 #include "core/metrics.h"
 #include "formats/image_set.h"
+#include "tests/test_paths.h"
 
 using namespace btfc;
 
