@@ -67,7 +67,7 @@ fi
 cmake --build "$B" -j "$(nproc)"
 t1=$(date +%s)
 
-LOGS=$ROOT/$B/san-logs
+LOGS=$(cd "$B" && pwd)/san-logs
 rm -rf "$LOGS" && mkdir -p "$LOGS"
 # exitcode 86: a sanitizer error is never mistaken for the exit 1 a bad-input check expects.
 # intercept_tls_get_addr=0: up to LLVM 16 / GCC 13 the runtime's __tls_get_addr interceptor takes
