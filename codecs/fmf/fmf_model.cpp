@@ -48,36 +48,30 @@ Status FmfModel::decode_cl(const ResolvedRequest& rr, Btf& out) const {
 }
 
 Status FmfModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
-  if (m_desc.channels != 3 || m_cfg.color_model >= 0 || !native_eps() || !ocl::use_opencl()) return Model::eval_batch(q, out);
-  // Validate through the reference path's checks, then convert to the kernel's query layout:
-  // directions become 3 + 3 (index, weight) pairs (the renderer's index / weight textures).
-  std::vector<btfc_fmf_query> kq(q.size());
-  for (size_t i = 0; i < q.size(); ++i) {
-    const EvalQuery& e = q[i];
+  if (m_cfg.color_model >= 0 || (m_cfg.dfmf && (m_desc.channels != 3 || !native_eps()))) return Model::eval_batch(q, out);
+  for (const EvalQuery& e : q)
     if (e.x < 0 || e.y < 0 || e.x >= m_desc.width || e.y >= m_desc.height || (e.light >= 0) != (e.view >= 0) ||
         (e.light >= 0 && (size_t(e.light) >= m_desc.num_lights() || size_t(e.view) >= m_desc.num_views())))
       return Model::eval_batch(q, out);  // the reference reports the bad query
+  // rgb mode on a CPU: the sorted-block C++ path (fmf_eval.h). It is also faster than the OpenCL
+  // kernel on PoCL's CPU device (docs/benchmarks.md), so OpenCL serves eval_batch only on a GPU
+  // or when asked for (--device cl).
+  if (!m_cfg.dfmf && m_desc.num_lights() <= 65535 && m_desc.num_views() <= 65535) {  // fmf_eval.cpp packs indices in 16 bits
+    const ocl::DeviceChoice dc = ocl::device_choice();
+    bool gpu = false;
+    if (dc == ocl::DeviceChoice::automatic && ocl::use_opencl()) {
+      auto rt = ocl::Runtime::get();
+      gpu = rt.ok() && rt.value()->info().type == "gpu";
+    }
+    if (dc != ocl::DeviceChoice::cl && !gpu) return eval_batch_cpu(q, out);
   }
-  // A query with the same directions as its predecessor in its block (a frame's texels under one
-  // light and view) reuses its weights: the Delaunay lookups would cost more than the evaluation.
+  if (m_desc.channels != 3 || !ocl::use_opencl()) return Model::eval_batch(q, out);
+  // Convert to the kernel's query layout: directions become 3 + 3 (index, weight) pairs (the
+  // renderer's index / weight textures).
+  std::vector<btfc_fmf_query> kq(q.size());
   const size_t qb = 4096;
 #pragma omp parallel for schedule(static)
-  for (size_t b0 = 0; b0 < q.size(); b0 += qb)
-    for (size_t i = b0; i < std::min(q.size(), b0 + qb); ++i) {
-      const EvalQuery& e = q[i];
-      btfc_fmf_query& k = kq[i];
-      if (i > b0 && e.light < 0 && q[i - 1].light < 0 && std::memcmp(&e.wl, &q[i - 1].wl, sizeof(Vec3)) == 0 &&
-          std::memcmp(&e.wv, &q[i - 1].wv, sizeof(Vec3)) == 0) {
-        k = kq[i - 1];
-        k.texel = e.x + m_desc.width * e.y;
-        continue;
-      }
-      k.texel = e.x + m_desc.width * e.y;
-      DirWeights a, b;
-      if (e.light >= 0) a.index = {e.light, e.light, e.light}, b.index = {e.view, e.view, e.view};
-      else a = m_light_interp.weights(e.wl), b = m_view_interp.weights(e.wv);
-      for (int j = 0; j < 3; ++j) k.light[j] = a.index[j], k.view[j] = b.index[j], k.wl[j] = a.weight[j], k.wv[j] = b.weight[j];
-    }
+  for (size_t b0 = 0; b0 < q.size(); b0 += qb) to_weighted(q.data() + b0, std::min(qb, q.size() - b0), kq.data() + b0);
   // Runs of queries sharing a direction pair go through the blended-rows kernel (fmf_cl.h).
   Status s;
   auto dev = device_factors();

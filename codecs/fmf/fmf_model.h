@@ -152,6 +152,13 @@ class FmfModel final : public Model {
   }
   Status m_quant_status;  // a failed quantize_block: save() reports it
 
+  // The C++ throughput path of eval_batch (rgb mode, validated queries; fmf_eval.cpp), and the
+  // conversion of queries to 3 + 3 (index, weight) pairs it shares with the OpenCL path: a query
+  // with the same directions as its predecessor reuses its weights (a frame's texels under one
+  // light and view), since the two Delaunay lookups cost more than the evaluation.
+  Status eval_batch_cpu(std::span<const EvalQuery> q, float* out) const;
+  void to_weighted(const EvalQuery* q, size_t n, btfc_fmf_query* out) const;
+
   // The factors in the OpenCL kernels' layout (codecs/fmf/fmf_cl.h), uploaded on first use.
   Result<std::shared_ptr<fmf_cl::DeviceFactors>> device_factors() const;
   fmf_cl::PackedFactors packed() const;

@@ -1,0 +1,161 @@
+// Random-access evaluation benchmark (issue 24, docs/benchmarks.md): a rank-C rgb fmf model
+// with random factors in the UBO2003 layout (81 x 81 directions, 19683 rows, `--texels`
+// texels), evaluated at random texels and random directions (theta uniform in 0..80 degrees,
+// as `btfc bench` draws them; beyond the outermost ring at 75 degrees a direction is projected
+// onto the hull), all in one run so the ratios mean something on a noisy machine:
+//   - FmfModel::eval_batch from directions (the two Delaunay lookups included), C++ path;
+//   - the blend alone from precomputed (index, weight) pairs, as a renderer's index / weight
+//     textures give them (fmf_eval.h), with a sweep of the sorted block size;
+//   - the Delaunay lookups alone;
+//   - the per-query reference (Model::eval_batch: eval_dir per query), the test oracle;
+//   - the OpenCL kernel on the same weighted queries, when a device is present;
+//   - a coherent stream (frames of all texels under one direction pair) through eval_batch.
+//
+//   bench_eval [--texels 65536] [--rank 32] [--queries 4000000]
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <random>
+#include <string>
+
+#include "codecs/fmf/fmf_cl.h"
+#include "codecs/fmf/fmf_eval.h"
+#include "codecs/fmf/fmf_model.h"
+#include "core/cl_runtime.h"
+#include "core/cpu_dispatch.h"
+
+using namespace btfc;
+
+static double now_s() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+
+template <class F>
+static double best_of(int reps, F&& f) {
+  double best = 1e30;
+  for (int i = 0; i < reps; ++i) {
+    double t = now_s();
+    f();
+    best = std::min(best, now_s() - t);
+  }
+  return best;
+}
+
+int main(int argc, char** argv) {
+  int texels = 65536, C = 32;
+  size_t nq = 4000000;
+  bool profile = false;  // --profile 1: only the blend, repeated (for perf)
+  for (int i = 1; i + 1 < argc; i += 2) {
+    std::string a = argv[i];
+    if (a == "--texels") texels = std::atoi(argv[i + 1]);
+    else if (a == "--rank") C = std::atoi(argv[i + 1]);
+    else if (a == "--queries") nq = size_t(std::atoll(argv[i + 1]));
+    else if (a == "--profile") profile = std::atoi(argv[i + 1]) != 0;
+  }
+  const int side = int(std::lround(std::sqrt(double(texels))));
+  texels = side * side;
+  BtfDesc desc;
+  desc.width = desc.height = side;
+  desc.channels = 3;
+  desc.lights = desc.views = DirectionSet::ubo2003();
+  std::mt19937 rng(1);
+  std::uniform_real_distribution<float> u(-1, 1);
+  fmf::Block b;
+  b.name = "rgb";
+  b.U.resize(Eigen::Index(desc.abrdf_size()), C);
+  b.SxV.resize(texels, C);
+  for (Eigen::Index i = 0; i < b.U.size(); ++i) b.U.data()[i] = u(rng);
+  for (Eigen::Index i = 0; i < b.SxV.size(); ++i) b.SxV.data()[i] = u(rng);
+  b.S = Eigen::VectorXf::Ones(C), b.scale = Eigen::VectorXf::Ones(C);
+  fmf::Config cfg;
+  std::vector<fmf::Block> blocks{b};
+  fmf::FmfModel model(desc, "fmf:rank=" + std::to_string(C), cfg, std::move(blocks));
+  std::printf("rgb fmf, rank %d, %d x %d texels, 81 x 81 directions, %zu random queries, loops: %s\n", C, side, side, nq,
+              cpu_dispatch_level());
+
+  std::vector<EvalQuery> q(nq);
+  std::uniform_real_distribution<double> u01(0, 1);
+  const double max_theta = 80.0 * M_PI / 180;
+  for (EvalQuery& e : q) {
+    e.x = int(rng() % unsigned(side)), e.y = int(rng() % unsigned(side));
+    e.wl = dir_from_theta_phi(u01(rng) * max_theta, u01(rng) * 2 * M_PI);
+    e.wv = dir_from_theta_phi(u01(rng) * max_theta, u01(rng) * 2 * M_PI);
+  }
+  std::vector<float> out(3 * nq), ref(3 * nq);
+  auto rate = [&](double t) { return double(nq) / t / 1e6; };
+
+  ocl::set_device_choice(ocl::DeviceChoice::cpu);
+  (void)model.eval_batch(std::span(q).first(std::min<size_t>(nq, 100000)), out.data());
+  const double t_batch = best_of(3, [&] { (void)model.eval_batch(q, out.data()); });
+  std::printf("eval_batch, directions (C++ path)     %8.1f M evals/s\n", rate(t_batch));
+
+  // The weights alone, and the blend alone on them.
+  DirectionInterpolator interp(desc.lights);
+  std::vector<btfc_fmf_query> wq(nq);
+  const double t_weights = best_of(3, [&] {
+#pragma omp parallel for schedule(static)
+    for (size_t i = 0; i < nq; ++i) {
+      DirWeights a = interp.weights(q[i].wl), c = interp.weights(q[i].wv);
+      btfc_fmf_query& k = wq[i];
+      k.texel = q[i].x + side * q[i].y;
+      for (int j = 0; j < 3; ++j) k.light[j] = a.index[j], k.view[j] = c.index[j], k.wl[j] = a.weight[j], k.wv[j] = c.weight[j];
+    }
+  });
+  std::printf("Delaunay lookups alone (2 per query)  %8.1f M queries/s\n", rate(t_weights));
+  fmf::EvalFactors f;
+  f.U = model.blocks()[0].U.data(), f.SxV = model.blocks()[0].SxV.data(), f.C = C, f.nc = 3, f.nL = 81, f.nV = 81;
+  if (profile) {
+    const double t = best_of(20, [&] { fmf::eval_weighted(f, wq, out.data()); });
+    std::printf("blend alone %.1f M evals/s\n", rate(t));
+    return 0;
+  }
+  const double t_blend = best_of(3, [&] { fmf::eval_weighted(f, wq, out.data()); });
+  std::printf("blend alone, weighted queries         %8.1f M evals/s (block %zu)\n", rate(t_blend), fmf::k_eval_block);
+  for (size_t block : {size_t(1024), size_t(4096), size_t(16384), size_t(65536), size_t(262144), size_t(1) << 20}) {
+    const double t = best_of(3, [&] {
+      const size_t nb = (nq + block - 1) / block;
+#pragma omp parallel for schedule(dynamic, 1)
+      for (size_t i = 0; i < nb; ++i) {
+        const size_t b0 = i * block;
+        fmf::eval_weighted_block(f, wq.data() + b0, std::min(block, nq - b0), out.data() + 3 * b0);
+      }
+    });
+    std::printf("  block %6zu%s                    %8.1f M evals/s\n", block, "           ", rate(t));
+  }
+
+  // The per-query reference on a slice (it is slow), and the relative difference.
+  const size_t nr = std::min<size_t>(nq, 400000);
+  const double t_ref = best_of(1, [&] { (void)model.Model::eval_batch(std::span(q).first(nr), ref.data()); });
+  double num = 0, den = 0;
+  (void)model.eval_batch(q, out.data());
+  for (size_t i = 0; i < 3 * nr; ++i) num += double(out[i] - ref[i]) * (out[i] - ref[i]), den += double(ref[i]) * ref[i];
+  std::printf("reference (eval_dir per query)        %8.1f M evals/s   fast / reference = %.1f, rel. L2 diff %.2e\n",
+              double(nr) / t_ref / 1e6, (double(nq) / t_batch) / (double(nr) / t_ref),
+              std::sqrt(num / den));
+
+  // OpenCL on the same weighted queries.
+  ocl::set_device_choice(ocl::DeviceChoice::automatic);
+  if (ocl::Runtime::get().ok()) {
+    fmf_cl::PackedFactors pf;
+    pf.mode = BTFC_FMF_RGB, pf.blocks = 1, pf.C = C, pf.nL = 81, pf.nV = 81, pf.texels = texels, pf.rows_per_block = 3 * 81 * 81;
+    pf.U.assign(f.U, f.U + size_t(pf.rows_per_block) * C);
+    pf.SxV.assign(f.SxV, f.SxV + size_t(texels) * C);
+    auto dev = fmf_cl::DeviceFactors::upload(pf);
+    if (dev.ok()) {
+      (void)dev.value()->eval_interp(std::span(wq).first(1000), out.data());
+      const double t = best_of(3, [&] { (void)dev.value()->eval_interp(wq, out.data()); });
+      std::printf("OpenCL fmf_eval_interp (%s)  %8.1f M evals/s\n", ocl::Runtime::get().value()->info().type.c_str(), rate(t));
+    }
+  } else {
+    std::printf("OpenCL: no device\n");
+  }
+
+  // Coherent: frames of every texel under one direction pair each.
+  ocl::set_device_choice(ocl::DeviceChoice::cpu);
+  std::vector<EvalQuery> cq(nq);
+  for (size_t i = 0; i < nq; ++i) {
+    cq[i] = q[(i / size_t(texels)) % nq];
+    cq[i].x = int(i % size_t(texels)) % side, cq[i].y = int(i % size_t(texels)) / side;
+  }
+  const double t_coh = best_of(3, [&] { (void)model.eval_batch(cq, out.data()); });
+  std::printf("eval_batch, coherent frames           %8.1f M evals/s\n", rate(t_coh));
+  return 0;
+}

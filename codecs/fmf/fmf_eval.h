@@ -1,0 +1,46 @@
+// Random-access evaluation of rgb-mode fmf models on the CPU (issue 24): the throughput path of
+// FmfModel::eval_batch when no GPU is used.
+//
+// An interpolated value is the 3 x 3 blend of measured (light, view) pairs (core/interp.h):
+//   f(t, wl, wv) = sum_ab wl_a wv_b  U[pair(l_a, v_b)] . SxV[t]
+// which in rgb mode is linear in U, so the pair's rows are blended first (9 axpys over the
+// pair's nc x C contiguous floats) and then dotted with the texel's row (nc dots of C).
+// Random queries touch 27 scattered rows of U each; U (19683 x 32 floats for UBO2003, 2.5 MB)
+// does not fit a core's L2, so a block of queries is first ordered by its dominant direction
+// pair (a counting sort, stable): queries near one pair then find its rows in L1, and a run of
+// queries with identical weights (a renderer's frame under one light and view) blends once.
+// Results go back in the queries' order.
+//
+// Contract: out[i * nc + c] equals the reference blend of eval_dir (per pair eval() sums, in
+// (a, b) order) to float rounding: the blend order differs (rows first, then the dot), and the
+// tests assert a relative error <= 1e-5 against the reference.
+#pragma once
+#include <cstdint>
+#include <span>
+
+#include "kernels/btfc_shared.h"
+
+namespace btfc::fmf {
+
+// The factors of an rgb-mode model as stored (row-major, no padding):
+//   U [rows][C] with row = c + nc (l + nL v),  SxV [texels][C].
+struct EvalFactors {
+  const float* U = nullptr;
+  const float* SxV = nullptr;
+  int C = 0, nc = 3, nL = 0, nV = 0;
+};
+
+// Queries as a renderer's index / weight textures give them (btfc_fmf_query: texel and 3 + 3
+// (index, barycentric weight) pairs); indices and texels must be in range (not checked here).
+// Runs in parallel over blocks of queries (OpenMP).
+void eval_weighted(const EvalFactors& f, std::span<const btfc_fmf_query> q, float* out);
+
+// Queries per sorted block: large enough that queries near one pair meet in the order (81 x 81
+// directions have 6561 pairs), small enough to keep per thread: the block's sorted queries,
+// results and converted queries take 131072 x 112 B = 14 MB per thread, allocated on first use
+// and kept (fresh memory faults in slowly on the VMs btfc runs on). Exposed for the benchmark's
+// block-size sweep.
+constexpr size_t k_eval_block = 131072;
+void eval_weighted_block(const EvalFactors& f, const btfc_fmf_query* q, size_t n, float* out);
+
+}  // namespace btfc::fmf
