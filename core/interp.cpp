@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 
 namespace btfc {
 
@@ -25,6 +26,10 @@ constexpr double k_snap = 1e-6;
 // Absolute slack (parabolic area units, points are O(1)) for "inside a triangle" at query time;
 // rounding misses have a fallback, so this can stay tiny.
 constexpr double k_inside_tol = 1e-12;
+// Fine lookup table cells per side per sqrt(triangle count), i.e. ~1000 cells per triangle:
+// bench/interp_bench.cpp on UBO2003 (theta 0..80 deg) ran about 24 / 22 / 21 ns per call at
+// 16 / 24 / 32 (the table answers 74 / 81 / 86 %), and the build takes ~13 ms at 32.
+constexpr double k_fine_per_tri = 32;
 
 double cross(const Vec2& o, const Vec2& a, const Vec2& b) {
   return (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x);
@@ -191,6 +196,29 @@ std::vector<std::array<int, 3>> bowyer_watson(const std::vector<Vec2>& pts) {
   return out;
 }
 
+// Unnormalized barycentric weights of p in triangle t (twice the sub-triangle areas). The one
+// definition both the fast path and the reference search use, so they agree bit for bit.
+inline std::array<double, 3> bary(const std::vector<Vec2>& pts, const std::array<int, 3>& t, const Vec2& p) {
+  const Vec2 &a = pts[size_t(t[0])], &b = pts[size_t(t[1])], &c = pts[size_t(t[2])];
+  return {cross(b, c, p), cross(c, a, p), cross(a, b, p)};
+}
+
+double min3(const std::array<double, 3>& w) { return std::min({w[0], w[1], w[2]}); }
+
+// Running nearest point on the hull edges fed to add(), in their order (the first of equal
+// distances wins). Only edges that p is not strictly inside of can hold it.
+struct HullHit {
+  double best = std::numeric_limits<double>::infinity(), u = 0;
+  int ia = -1, ib = -1;
+  void add(const Vec2& a, const Vec2& b, int i, int j, const Vec2& p) {
+    if (cross(a, b, p) > 0) return;
+    double ex = b.x - a.x, ey = b.y - a.y;
+    double t = std::clamp(((p.x - a.x) * ex + (p.y - a.y) * ey) / (ex * ex + ey * ey), 0.0, 1.0);
+    double dx = a.x + t * ex - p.x, dy = a.y + t * ey - p.y, d2 = dx * dx + dy * dy;
+    if (d2 < best) best = d2, u = t, ia = i, ib = j;
+  }
+};
+
 // Exact (1, 0, 0) on one direction.
 DirWeights single(int i) {
   DirWeights w;
@@ -284,47 +312,281 @@ DirectionInterpolator::DirectionInterpolator(const DirectionSet& set) {
     if (pass == 0)
       for (int c = 0; c < g * g; ++c) m_cell_start[c + 1] += m_cell_start[c];
   }
+  build_fine_table();
+}
+
+namespace {
+
+// A closed rectangle of parabolic space.
+struct Rect {
+  double x0, y0, x1, y1;
+};
+
+// Bounds on what cross(o, a, q) evaluates to in double, for every q in r. The exact value is
+// affine in q, so its extremes are at corners; each corner value is off by at most a few ulps
+// of its terms (bounded 45x over by k_ulps), and so is the value at any q (convex in q, so also
+// bounded by the corners).
+std::array<double, 3> cross_bounds(const Vec2& o, const Vec2& a, const Rect& r) {
+  constexpr double k_ulps = 1e-14;
+  const double ex = std::fabs(a.x - o.x), ey = std::fabs(a.y - o.y);
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo, err = 0;
+  for (const Vec2& q : {Vec2{r.x0, r.y0}, Vec2{r.x1, r.y0}, Vec2{r.x0, r.y1}, Vec2{r.x1, r.y1}}) {
+    const double v = cross(o, a, q);
+    const double e = k_ulps * (ex * (std::fabs(q.y) + std::fabs(o.y)) + ey * (std::fabs(q.x) + std::fabs(o.x)));
+    lo = std::min(lo, v - e), hi = std::max(hi, v + e), err = std::max(err, e);
+  }
+  return {lo - err, hi + err, err};  // the bounds, and the largest rounding error
+}
+
+// Does the search's test min3(bary(t, q)) >= -k_inside_tol fail for every q in r? Yes when one
+// cross product is below -k_inside_tol all over r; or when r lies beside t's bounding box, by
+// gap along x or y: with barycentrics l summing to 1, q.x - max v.x = sum l_k (v_k.x - max v.x)
+// <= 2 * (-min l) * width, so min l <= -gap / (2 width) and that cross product is at most
+// -area2 * gap / (2 width) exactly, still below -k_inside_tol after rounding (err). The gap test
+// runs first with a looser bound on err (no cross_bounds), as it rejects most candidates.
+// Accepted for every q in r when all three stay >= -k_inside_tol.
+struct TriVerdict {
+  bool accept, reject;
+};
+TriVerdict classify(const std::vector<Vec2>& pts, const std::array<int, 3>& t, const Rect& r) {
+  const Vec2 &a = pts[size_t(t[0])], &b = pts[size_t(t[1])], &c = pts[size_t(t[2])];
+  const double x0 = std::min({a.x, b.x, c.x}), x1 = std::max({a.x, b.x, c.x});
+  const double y0 = std::min({a.y, b.y, c.y}), y1 = std::max({a.y, b.y, c.y});
+  const double area2 = 0.5 * std::fabs(cross(a, b, c));  // halved: room for its own rounding
+  const double gx = std::max(r.x0 - x1, x0 - r.x1), gy = std::max(r.y0 - y1, y0 - r.y1);
+  const double worst = std::max(gx > 0 ? area2 * gx / (2 * (x1 - x0)) : 0.0, gy > 0 ? area2 * gy / (2 * (y1 - y0)) : 0.0);
+  if (worst > 0) {
+    // Most candidates are rejected here, before cross_bounds, with a looser bound on its err.
+    const double ext = std::max(x1 - x0, y1 - y0);
+    const double mag = std::max({std::fabs(x0), std::fabs(x1), std::fabs(y0), std::fabs(y1)});
+    const double rmag = std::max({std::fabs(r.x0), std::fabs(r.x1), std::fabs(r.y0), std::fabs(r.y1)});
+    if (worst > 2 * (k_inside_tol + 2e-14 * ext * (mag + rmag))) return {false, true};
+  }
+  bool accept = true, reject = false;
+  double err = 0;
+  for (int e = 0; e < 3; ++e) {
+    const auto bd = cross_bounds(pts[size_t(t[(e + 1) % 3])], pts[size_t(t[(e + 2) % 3])], r);
+    accept = accept && bd[0] >= -k_inside_tol;
+    reject = reject || bd[1] < -k_inside_tol;
+    err = std::max(err, bd[2]);
+  }
+  return {accept, reject || worst > 2 * (k_inside_tol + err)};
+}
+
+double dist_to_segment(const Vec2& a, const Vec2& b, const Vec2& p) {
+  const double ex = b.x - a.x, ey = b.y - a.y;
+  const double t = std::clamp(((p.x - a.x) * ex + (p.y - a.y) * ey) / (ex * ex + ey * ey), 0.0, 1.0);
+  const double dx = a.x + t * ex - p.x, dy = a.y + t * ey - p.y;
+  return std::sqrt(dx * dx + dy * dy);
+}
+
+}  // namespace
+
+// The table holds, per cell, what weights_at() is proven to do for EVERY point that the query
+// arithmetic maps into the cell, so that the fast path returns the same bits:
+//  - triangle t: for each coarse cell the rectangle can map to, every candidate listed before t
+//    rejects all of the rectangle and t accepts all of it (classify). The search then returns
+//    make_weights(t, bary(t, p)), computed the same way by the fast path.
+//  - hull edge list: every candidate triangle rejects the rectangle (or it lies outside the coarse
+//    grid), so the search projects onto the hull. The list keeps, in m_hull order, every edge
+//    that can come within a margin of the nearest; the edges left out are farther for every
+//    point of the cell, so they can neither win nor tie, and the first-of-equals rule agrees.
+//  - candidate list: the candidates that can accept some point of the rectangle, in the order
+//    the search tests them (the same for every coarse cell it can map to), up to one that
+//    accepts all of it. The others reject every point, so testing only these finds the same
+//    first triangle; if none holds the point, the search would go on to the hull, and so does
+//    the fast path (weights_at).
+// "Every" is made rigorous by bounding rounding (cross_bounds, and a cell rectangle widened far
+// past what fx = (p - lo) * inv can round into); any doubt leaves the cell undecided (-1).
+void DirectionInterpolator::build_fine_table() {
+  double lo_x = 1e300, lo_y = 1e300, hi_x = -1e300, hi_y = -1e300;
+  for (const Vec2& p : m_pts)
+    if (is_vertex(p)) lo_x = std::min(lo_x, p.x), lo_y = std::min(lo_y, p.y), hi_x = std::max(hi_x, p.x), hi_y = std::max(hi_y, p.y);
+  // Square, over the bounding box widened by k_widen of its size on each side: for a set up to
+  // theta 75 deg (UBO) that reaches theta 85 deg, so grazing queries hit the table too.
+  constexpr double k_widen = 0.1;
+  const double size = std::max(hi_x - lo_x, hi_y - lo_y), side = size * (1 + 2 * k_widen);
+  // Entries and lists hold triangle and hull edge indices as int16_t.
+  if (!(size > 0) || !std::isfinite(side) || m_hull.size() > size_t(INT16_MAX) || m_tris.size() > size_t(INT16_MAX)) return;
+  const int n = std::clamp(int(std::lround(k_fine_per_tri * std::sqrt(double(m_tris.size())))), 16, k_fine_max);
+  const double cw = side / n;
+  m_fine_lo = {0.5 * (lo_x + hi_x) - 0.5 * side, 0.5 * (lo_y + hi_y) - 0.5 * side};
+  // A point maps into a cell when its rounded fx lies in [i, i + 1): allow far more than that
+  // rounding around the exact cell.
+  const double margin = 1e-7 * cw + 1e-13 * (std::fabs(m_fine_lo.x) + std::fabs(m_fine_lo.y) + side);
+  const double path_margin = 1e-9 * (1 + std::fabs(m_fine_lo.x) + std::fabs(m_fine_lo.y) + side);
+  const int g = m_grid_n;
+  std::map<std::vector<int16_t>, int> lists, multis;  // distinct hull edge / candidate lists, by id
+  std::vector<int16_t> seq, cell_seq;
+  std::vector<int16_t> list;
+  std::vector<double> lower(m_hull.size());
+  std::vector<int> order;
+
+  // The table entry for the points of [x0, x0 + w] x [y0, y0 + w], widened by m.
+  auto classify_cell = [&](double x0, double y0, double w, double m) -> int16_t {
+    const Rect r{x0 - m, y0 - m, x0 + w + m, y0 + w + m};
+    // Coarse cells the query arithmetic can put a point of r in (monotone in p, so the range
+    // of the corners); a point outside [0, g) skips the triangle search.
+    const double cx0 = (r.x0 - m_grid_lo.x) * m_grid_inv.x, cx1 = (r.x1 - m_grid_lo.x) * m_grid_inv.x;
+    const double cy0 = (r.y0 - m_grid_lo.y) * m_grid_inv.y, cy1 = (r.y1 - m_grid_lo.y) * m_grid_inv.y;
+    // Per coarse cell: its candidates that can accept some point of r, in list order, up to the
+    // first that accepts all of r (the later ones are never reached). The search on a point of r
+    // tests exactly these in this order, up to the rejected ones (which fail for it anyway).
+    bool first = true, same = true, ends_accepted = false;
+    seq.clear();
+    if (cx1 >= 0 && cy1 >= 0 && cx0 < g && cy0 < g) {
+      const int x_0 = int(std::max(cx0, 0.0)), x_1 = int(std::min(cx1, g - 1.0));
+      const int y_0 = int(std::max(cy0, 0.0)), y_1 = int(std::min(cy1, g - 1.0));
+      for (int y = y_0; y <= y_1 && same; ++y)
+        for (int x = x_0; x <= x_1 && same; ++x) {
+          const int c = y * g + x;
+          cell_seq.clear();
+          bool accepted = false;
+          for (int k = m_cell_start[c]; k < m_cell_start[c + 1] && !accepted; ++k) {
+            const TriVerdict v = classify(m_pts, m_tris[size_t(m_cell_tris[k])], r);
+            if (!v.reject) cell_seq.push_back(int16_t(m_cell_tris[k])), accepted = v.accept;
+          }
+          if (first) seq = cell_seq, ends_accepted = accepted, first = false;
+          else same = seq == cell_seq;  // a mix of answers is undecided
+        }
+    }
+    if (!same) return -1;
+    if (!seq.empty()) {
+      // Points of r outside the coarse grid skip the search: not allowed here.
+      const bool all_in_grid = cx0 >= 0 && cy0 >= 0 && cx1 < g && cy1 < g;
+      if (!all_in_grid) return -1;
+      if (seq.size() == 1 && ends_accepted) return seq[0];
+      if (seq.size() > size_t(k_multi)) return -1;
+      seq.resize(k_multi, -1);
+      const int id = multis.emplace(seq, int(multis.size())).first->second;
+      return id < k_multi_count ? int16_t(k_multi_base - id) : int16_t(-1);
+    }
+    // Hull projection for every point of r. The nearest distance is at most `best` (from edges
+    // that take part everywhere in r); keep the edges that can come near it.
+    const Vec2 mid{0.5 * (r.x0 + r.x1), 0.5 * (r.y0 + r.y1)};
+    const double half_diag = std::sqrt(0.5) * (r.x1 - r.x0) * (1 + 1e-9);
+    for (size_t h = 0; h < m_hull.size(); ++h)
+      lower[h] = dist_to_segment(m_pts[size_t(m_hull[h][0])], m_pts[size_t(m_hull[h][1])], mid) - half_diag;
+    // The nearest edge (by distance to mid) that takes part everywhere in r; usually the first.
+    double best = std::numeric_limits<double>::infinity();
+    order.resize(m_hull.size());
+    for (size_t h = 0; h < order.size(); ++h) order[h] = int(h);
+    std::sort(order.begin(), order.end(), [&](int x, int y) { return lower[size_t(x)] < lower[size_t(y)]; });
+    for (int h : order)
+      if (cross_bounds(m_pts[size_t(m_hull[size_t(h)][0])], m_pts[size_t(m_hull[size_t(h)][1])], r)[1] <= 0) {
+        best = lower[size_t(h)] + 2 * half_diag;
+        break;
+      }
+    if (!(best < std::numeric_limits<double>::infinity())) return -1;
+    list.clear();
+    for (size_t h = 0; h < m_hull.size(); ++h)
+      if (lower[h] <= best + path_margin) list.push_back(int16_t(h));
+    const int id = lists.emplace(list, int(lists.size())).first->second;
+    return id < k_list_count ? int16_t(-2 - id) : int16_t(-1);
+  };
+
+  // Blocks of k_block x k_block cells first: a block of one triangle, or of hull edges, gives
+  // that answer to all its cells (a proof for the block, widened past its cells' own margins,
+  // holds for each of them), which saves most of the build time.
+  std::vector<int16_t> table(size_t(n) * size_t(n));
+  for (int bj = 0; bj < n; bj += k_block)
+    for (int bi = 0; bi < n; bi += k_block) {
+      const int nj = std::min(k_block, n - bj), ni = std::min(k_block, n - bi);
+      const int16_t e = ni == nj ? classify_cell(m_fine_lo.x + bi * cw, m_fine_lo.y + bj * cw, ni * cw, 2 * margin) : -1;
+      const bool whole = e >= 0 || (e < -1 && e > k_multi_base);
+      for (int j = bj; j < bj + nj; ++j)
+        for (int i = bi; i < bi + ni; ++i)
+          table[size_t(j) * size_t(n) + size_t(i)] = whole ? e : classify_cell(m_fine_lo.x + i * cw, m_fine_lo.y + j * cw, cw, margin);
+    }
+  std::vector<const std::vector<int16_t>*> by_id(lists.size());
+  for (const auto& [l, id] : lists) by_id[size_t(id)] = &l;
+  m_out_start.assign(1, 0);
+  for (const auto* l : by_id) {
+    m_out_edges.insert(m_out_edges.end(), l->begin(), l->end());
+    m_out_start.push_back(int(m_out_edges.size()));
+  }
+  m_multi.assign(multis.size() * k_multi, -1);
+  for (const auto& [l, id] : multis) std::copy(l.begin(), l.end(), m_multi.begin() + ptrdiff_t(id) * k_multi);
+  for (const auto& t : m_tris) m_corner_tris.push_back({m_pts[size_t(t[0])], m_pts[size_t(t[1])], m_pts[size_t(t[2])], t});
+  m_fine = std::move(table);
+  m_fine_n = n;
+  m_fine_inv = n / side;
+}
+
+DirWeights DirectionInterpolator::weights_reference(const Vec3& dir) const {
+  if (m_pts.empty()) return {};
+  return weights_at(to_parabolic(dir));
+}
+
+inline int DirectionInterpolator::table_entry(const Vec2& p) const {
+  // The cell arithmetic build_fine_table allows for; NaN fails the range test.
+  const double fx = (p.x - m_fine_lo.x) * m_fine_inv, fy = (p.y - m_fine_lo.y) * m_fine_inv;
+  if (!(fx >= 0 && fy >= 0 && fx < m_fine_n && fy < m_fine_n)) return -1;
+  return m_fine[size_t(int(fy)) * size_t(m_fine_n) + size_t(int(fx))];
 }
 
 DirWeights DirectionInterpolator::weights(const Vec3& dir) const {
-  if (m_pts.empty()) return {};
+  // The common case inline and short (one branch); the rest out of line (table_miss).
   const Vec2 p = to_parabolic(dir);
+  const int c = table_entry(p);  // -1 for an empty interpolator (no table)
+  if (c < 0) return table_miss(p, c);
+  // bary() on the triangle's own copy of its points: the same doubles, one dependent load less.
+  const CornerTri& t = m_corner_tris[size_t(c)];
+  return make_weights(t.index, {cross(t.b, t.c, p), cross(t.c, t.a, p), cross(t.a, t.b, p)});
+}
 
+[[gnu::noinline]] DirWeights DirectionInterpolator::table_miss(const Vec2& p, int c) const {
+  if (c <= k_multi_base) {
+    // Candidates in the search's order: the first that accepts p is what the search returns; if
+    // none does, the search goes on past them (to candidates that reject p) to the hull.
+    for (int k = 0; k < k_multi; ++k) {
+      const int ti = m_multi[size_t(k_multi_base - c) * k_multi + size_t(k)];
+      if (ti < 0) break;
+      const auto& t = m_tris[size_t(ti)];
+      const std::array<double, 3> w = bary(m_pts, t, p);
+      if (min3(w) >= -k_inside_tol) return make_weights(t, w);
+    }
+    return weights_at(p);
+  }
+  if (c < -1) {
+    HullHit h;
+    for (int k = m_out_start[size_t(-2 - c)]; k < m_out_start[size_t(-1 - c)]; ++k) {
+      const auto& e = m_hull[size_t(m_out_edges[size_t(k)])];
+      h.add(m_pts[size_t(e[0])], m_pts[size_t(e[1])], e[0], e[1], p);
+    }
+    return make_weights({h.ia, h.ib, h.ia}, {1 - h.u, h.u, 0});
+  }
+  if (m_pts.empty()) return {};
+  return weights_at(p);
+}
+
+int DirectionInterpolator::fast_path_kind(const Vec3& dir) const {
+  if (m_pts.empty()) return 0;
+  const int c = table_entry(to_parabolic(dir));
+  return c >= 0 ? 1 : c <= k_multi_base ? 3 : c < -1 ? 2 : 0;
+}
+
+[[gnu::noinline]] DirWeights DirectionInterpolator::weights_at(const Vec2& p) const {
   if (!m_tris.empty()) {
-    // Unnormalized barycentric weights of p in triangle t (twice the sub-triangle areas).
-    auto bary = [&](const std::array<int, 3>& t) {
-      const Vec2 &a = m_pts[t[0]], &b = m_pts[t[1]], &c = m_pts[t[2]];
-      return std::array<double, 3>{cross(b, c, p), cross(c, a, p), cross(a, b, p)};
-    };
-    auto min3 = [](const std::array<double, 3>& w) { return std::min({w[0], w[1], w[2]}); };
     const double cx = (p.x - m_grid_lo.x) * m_grid_inv.x, cy = (p.y - m_grid_lo.y) * m_grid_inv.y;
     if (cx >= 0 && cy >= 0 && cx < m_grid_n && cy < m_grid_n) {
       const int c = int(cy) * m_grid_n + int(cx);
       for (int k = m_cell_start[c]; k < m_cell_start[c + 1]; ++k) {
         const auto& t = m_tris[m_cell_tris[k]];
-        std::array<double, 3> w = bary(t);
+        std::array<double, 3> w = bary(m_pts, t, p);
         if (min3(w) >= -k_inside_tol) return make_weights(t, w);
       }
     }
-    // Outside the hull: project onto the nearest point of the hull boundary. Only edges that
-    // p is not strictly inside of can hold it.
-    double best = std::numeric_limits<double>::infinity(), best_u = 0;
-    int ia = -1, ib = -1;
-    for (const auto& e : m_hull) {
-      const Vec2 &a = m_pts[e[0]], &b = m_pts[e[1]];
-      if (cross(a, b, p) > 0) continue;
-      double ex = b.x - a.x, ey = b.y - a.y;
-      double u = std::clamp(((p.x - a.x) * ex + (p.y - a.y) * ey) / (ex * ex + ey * ey), 0.0, 1.0);
-      double dx = a.x + u * ex - p.x, dy = a.y + u * ey - p.y, d2 = dx * dx + dy * dy;
-      if (d2 < best) best = d2, best_u = u, ia = e[0], ib = e[1];
-    }
-    if (ia >= 0) return make_weights({ia, ib, ia}, {1 - best_u, best_u, 0});
+    // Outside the hull: project onto the nearest point of the hull boundary.
+    HullHit h;
+    for (const auto& e : m_hull) h.add(m_pts[e[0]], m_pts[e[1]], e[0], e[1], p);
+    if (h.ia >= 0) return make_weights({h.ia, h.ib, h.ia}, {1 - h.u, h.u, 0});
     // Inside every hull edge yet in no candidate triangle: only rounding on an edge can do that.
     // Take the triangle p is least outside of and clamp.
     const std::array<int, 3>* best_t = &m_tris[0];
     for (const auto& t : m_tris)
-      if (min3(bary(t)) > min3(bary(*best_t))) best_t = &t;
-    return make_weights(*best_t, bary(*best_t));
+      if (min3(bary(m_pts, t, p)) > min3(bary(m_pts, *best_t, p))) best_t = &t;
+    return make_weights(*best_t, bary(m_pts, *best_t, p));
   }
 
   // Degenerate sets (one point, two points, or all collinear): interpolate along the line

@@ -13,8 +13,10 @@
 //  - Degenerate sets are handled: one direction (weight 1 on it), all directions collinear in
 //    parabolic space (interpolation along the nearest segment).
 //  - Build is O(n^2) worst case; n is at most a few hundred directions here.
+//  - weights() returns exactly (bit for bit) what weights_reference() returns, for every input.
 #pragma once
 #include <array>
+#include <cstdint>
 #include <vector>
 
 #include "core/btf.h"
@@ -35,7 +37,23 @@ class DirectionInterpolator {
  public:
   DirectionInterpolator() = default;
   explicit DirectionInterpolator(const DirectionSet& set);
+  // Fast: most queries are answered from a fine lookup table (one load and one barycentric
+  // evaluation); the rest take weights_reference(). Thread-safe (const, no caches).
   DirWeights weights(const Vec3& dir) const;
+  // The simple search (coarse grid of candidate triangles, then nearest hull edge), kept as the
+  // definition of the result and to test the fast path against: same output for every input.
+  DirWeights weights_reference(const Vec3& dir) const;
+  // For tests and benchmarks: how weights(dir) answers (0: weights_reference; a table cell of
+  // 1: one triangle, 2: hull edges, 3: a few candidate triangles, the reference if none holds
+  // dir), and the table's cells (cell (i, j) covers [lo.x + i * cell, lo.x + (i + 1) * cell) x
+  // the same in y; n = 0: no table).
+  int fast_path_kind(const Vec3& dir) const;
+  struct FineGrid {
+    Vec2 lo;
+    double cell = 0;
+    int n = 0;
+  };
+  FineGrid fine_grid() const { return {m_fine_lo, m_fine_n > 0 ? 1 / m_fine_inv : 0, m_fine_n}; }
   // Triangles as index triples into the direction set (empty for degenerate sets).
   const std::vector<std::array<int, 3>>& triangles() const { return m_tris; }
 
@@ -49,6 +67,31 @@ class DirectionInterpolator {
   int m_grid_n = 0;
   std::vector<int> m_cell_start, m_cell_tris;
   std::vector<std::array<int, 2>> m_hull;
+  // Fast path (see build_fine_table in interp.cpp): a finer square grid over the points'
+  // bounding box widened on every side (grazing queries beyond the hull land in it too). A cell
+  // holds t >= 0 when the reference search returns triangle t for every point of the cell;
+  // -2 - k when it returns the projection onto one of the hull edges in list k (CSR, m_hull
+  // indices); k_multi_base - k when it returns the first of up to k_multi candidates (m_multi,
+  // -1 padded) that holds the point, for a cell across a triangle edge; -1 when undecided.
+  static constexpr int k_multi = 4, k_list_count = 16383, k_multi_count = 16383;
+  static constexpr int k_multi_base = -2 - k_list_count;
+  static constexpr int k_fine_max = 384, k_block = 4;  // table side limit; build block size
+  Vec2 m_fine_lo;
+  double m_fine_inv = 0;
+  int m_fine_n = 0;
+  std::vector<int16_t> m_fine, m_multi;
+  struct CornerTri {
+    Vec2 a, b, c;  // m_pts[index[0..2]]
+    std::array<int, 3> index;
+  };
+  std::vector<CornerTri> m_corner_tris;  // by triangle
+  std::vector<int> m_out_start;
+  std::vector<int16_t> m_out_edges;
+
+  DirWeights weights_at(const Vec2& p) const;  // the reference search for a parabolic point
+  int table_entry(const Vec2& p) const;        // -1 when p is not in the table
+  DirWeights table_miss(const Vec2& p, int entry) const;  // weights() for an entry < 0
+  void build_fine_table();
 };
 
 }  // namespace btfc
