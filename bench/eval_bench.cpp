@@ -157,5 +157,14 @@ int main(int argc, char** argv) {
   }
   const double t_coh = best_of(3, [&] { (void)model.eval_batch(cq, out.data()); });
   std::printf("eval_batch, coherent frames           %8.1f M evals/s\n", rate(t_coh));
+  // The same two streams through the OpenCL path of eval_batch (--device cl), when present.
+  ocl::set_device_choice(ocl::DeviceChoice::cl);
+  if (ocl::Runtime::get().ok()) {
+    (void)model.eval_batch(std::span(q).first(std::min<size_t>(nq, 100000)), out.data());
+    const double t_r = best_of(3, [&] { (void)model.eval_batch(q, out.data()); });
+    const double t_c = best_of(3, [&] { (void)model.eval_batch(cq, out.data()); });
+    std::printf("eval_batch on OpenCL (%s): random %.1f, coherent %.1f M evals/s\n", ocl::Runtime::get().value()->info().type.c_str(),
+                rate(t_r), rate(t_c));
+  }
   return 0;
 }

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstring>
+#include <omp.h>
 #include <vector>
 
 #include "codecs/fmf/fmf_model.h"
@@ -181,11 +182,17 @@ BTFC_CPU_CLONES void eval_weighted_block(const EvalFactors& f, const btfc_fmf_qu
     for (size_t c = 0; c < nc; ++c) out[size_t(sorted[j].orig) * nc + c] = res[j * nc + c];
 }
 
+// Queries per block for a batch of n: k_eval_block, or fewer so that every thread gets one.
+static size_t block_for(size_t n) {
+  const size_t threads = omp_in_parallel() ? 1 : size_t(std::max(1, omp_get_max_threads()));
+  return std::clamp<size_t>((n + threads - 1) / threads, 1, k_eval_block);
+}
+
 void eval_weighted(const EvalFactors& f, std::span<const btfc_fmf_query> q, float* out) {
-  const size_t nb = (q.size() + k_eval_block - 1) / k_eval_block;
+  const size_t block = block_for(q.size()), nb = (q.size() + block - 1) / block;
 #pragma omp parallel for schedule(dynamic, 1)
   for (size_t b = 0; b < nb; ++b) {
-    const size_t b0 = b * k_eval_block, n = std::min(k_eval_block, q.size() - b0);
+    const size_t b0 = b * block, n = std::min(block, q.size() - b0);
     eval_weighted_block(f, q.data() + b0, n, out + b0 * size_t(f.nc));
   }
 }
@@ -220,14 +227,14 @@ Status FmfModel::eval_batch_cpu(std::span<const EvalQuery> q, float* out) const 
   f.U = blk.U.data(), f.SxV = blk.SxV.data();
   f.C = int(blk.U.cols()), f.nc = m_desc.channels;
   f.nL = int(m_desc.num_lights()), f.nV = int(m_desc.num_views());
-  const size_t nb = (q.size() + k_eval_block - 1) / k_eval_block;
+  const size_t block = block_for(q.size()), nb = (q.size() + block - 1) / block;
 #pragma omp parallel
   {
     thread_local std::vector<btfc_fmf_query> kq;  // kept, as the sorted block's buffers
-    if (kq.size() < std::min(k_eval_block, q.size())) kq.resize(std::min(k_eval_block, q.size()));
+    if (kq.size() < block) kq.resize(block);
 #pragma omp for schedule(dynamic, 1)
     for (size_t b = 0; b < nb; ++b) {
-      const size_t b0 = b * k_eval_block, n = std::min(k_eval_block, q.size() - b0);
+      const size_t b0 = b * block, n = std::min(block, q.size() - b0);
       to_weighted(q.data() + b0, n, kq.data());
       eval_weighted_block(f, kq.data(), n, out + b0 * size_t(f.nc));
     }
