@@ -312,7 +312,7 @@ DirectionInterpolator::DirectionInterpolator(const DirectionSet& set) {
     if (pass == 0)
       for (int c = 0; c < g * g; ++c) m_cell_start[c + 1] += m_cell_start[c];
   }
-  build_fine_table();
+  m_lazy = std::make_shared<LazyTable>();
 }
 
 namespace {
@@ -398,7 +398,7 @@ double dist_to_segment(const Vec2& a, const Vec2& b, const Vec2& p) {
 //    the fast path (weights_at).
 // "Every" is made rigorous by bounding rounding (cross_bounds, and a cell rectangle widened far
 // past what fx = (p - lo) * inv can round into); any doubt leaves the cell undecided (-1).
-void DirectionInterpolator::build_fine_table() {
+void DirectionInterpolator::build_fine_table(FineTable& T) const {
   double lo_x = 1e300, lo_y = 1e300, hi_x = -1e300, hi_y = -1e300;
   for (const Vec2& p : m_pts)
     if (is_vertex(p)) lo_x = std::min(lo_x, p.x), lo_y = std::min(lo_y, p.y), hi_x = std::max(hi_x, p.x), hi_y = std::max(hi_y, p.y);
@@ -410,11 +410,11 @@ void DirectionInterpolator::build_fine_table() {
   if (!(size > 0) || !std::isfinite(side) || m_hull.size() > size_t(INT16_MAX) || m_tris.size() > size_t(INT16_MAX)) return;
   const int n = std::clamp(int(std::lround(k_fine_per_tri * std::sqrt(double(m_tris.size())))), 16, k_fine_max);
   const double cw = side / n;
-  m_fine_lo = {0.5 * (lo_x + hi_x) - 0.5 * side, 0.5 * (lo_y + hi_y) - 0.5 * side};
+  T.lo = {0.5 * (lo_x + hi_x) - 0.5 * side, 0.5 * (lo_y + hi_y) - 0.5 * side};
   // A point maps into a cell when its rounded fx lies in [i, i + 1): allow far more than that
   // rounding around the exact cell.
-  const double margin = 1e-7 * cw + 1e-13 * (std::fabs(m_fine_lo.x) + std::fabs(m_fine_lo.y) + side);
-  const double path_margin = 1e-9 * (1 + std::fabs(m_fine_lo.x) + std::fabs(m_fine_lo.y) + side);
+  const double margin = 1e-7 * cw + 1e-13 * (std::fabs(T.lo.x) + std::fabs(T.lo.y) + side);
+  const double path_margin = 1e-9 * (1 + std::fabs(T.lo.x) + std::fabs(T.lo.y) + side);
   const int g = m_grid_n;
   std::map<std::vector<int16_t>, int> lists, multis;  // distinct hull edge / candidate lists, by id
   std::vector<int16_t> seq, cell_seq;
@@ -492,25 +492,25 @@ void DirectionInterpolator::build_fine_table() {
   for (int bj = 0; bj < n; bj += k_block)
     for (int bi = 0; bi < n; bi += k_block) {
       const int nj = std::min(k_block, n - bj), ni = std::min(k_block, n - bi);
-      const int16_t e = ni == nj ? classify_cell(m_fine_lo.x + bi * cw, m_fine_lo.y + bj * cw, ni * cw, 2 * margin) : -1;
+      const int16_t e = ni == nj ? classify_cell(T.lo.x + bi * cw, T.lo.y + bj * cw, ni * cw, 2 * margin) : -1;
       const bool whole = e >= 0 || (e < -1 && e > k_multi_base);
       for (int j = bj; j < bj + nj; ++j)
         for (int i = bi; i < bi + ni; ++i)
-          table[size_t(j) * size_t(n) + size_t(i)] = whole ? e : classify_cell(m_fine_lo.x + i * cw, m_fine_lo.y + j * cw, cw, margin);
+          table[size_t(j) * size_t(n) + size_t(i)] = whole ? e : classify_cell(T.lo.x + i * cw, T.lo.y + j * cw, cw, margin);
     }
   std::vector<const std::vector<int16_t>*> by_id(lists.size());
   for (const auto& [l, id] : lists) by_id[size_t(id)] = &l;
-  m_out_start.assign(1, 0);
+  T.out_start.assign(1, 0);
   for (const auto* l : by_id) {
-    m_out_edges.insert(m_out_edges.end(), l->begin(), l->end());
-    m_out_start.push_back(int(m_out_edges.size()));
+    T.out_edges.insert(T.out_edges.end(), l->begin(), l->end());
+    T.out_start.push_back(int(T.out_edges.size()));
   }
-  m_multi.assign(multis.size() * k_multi, -1);
-  for (const auto& [l, id] : multis) std::copy(l.begin(), l.end(), m_multi.begin() + ptrdiff_t(id) * k_multi);
-  for (const auto& t : m_tris) m_corner_tris.push_back({m_pts[size_t(t[0])], m_pts[size_t(t[1])], m_pts[size_t(t[2])], t});
-  m_fine = std::move(table);
-  m_fine_n = n;
-  m_fine_inv = n / side;
+  T.multi.assign(multis.size() * k_multi, -1);
+  for (const auto& [l, id] : multis) std::copy(l.begin(), l.end(), T.multi.begin() + ptrdiff_t(id) * k_multi);
+  for (const auto& t : m_tris) T.corner_tris.push_back({m_pts[size_t(t[0])], m_pts[size_t(t[1])], m_pts[size_t(t[2])], t});
+  T.cells = std::move(table);
+  T.n = n;
+  T.inv = n / side;
 }
 
 DirWeights DirectionInterpolator::weights_reference(const Vec3& dir) const {
@@ -518,29 +518,46 @@ DirWeights DirectionInterpolator::weights_reference(const Vec3& dir) const {
   return weights_at(to_parabolic(dir));
 }
 
-inline int DirectionInterpolator::table_entry(const Vec2& p) const {
+const DirectionInterpolator::FineTable& DirectionInterpolator::fine() const {
+  static const FineTable none;
+  if (!m_lazy) return none;
+  if (!m_lazy->ready.load(std::memory_order_acquire))
+    std::call_once(m_lazy->once, [&] {
+      build_fine_table(m_lazy->table);
+      m_lazy->ready.store(true, std::memory_order_release);
+    });
+  return m_lazy->table;
+}
+
+DirectionInterpolator::FineGrid DirectionInterpolator::fine_grid() const {
+  const FineTable& t = fine();
+  return {t.lo, t.n > 0 ? 1 / t.inv : 0, t.n};
+}
+
+inline int DirectionInterpolator::table_entry(const FineTable& t, const Vec2& p) {
   // The cell arithmetic build_fine_table allows for; NaN fails the range test.
-  const double fx = (p.x - m_fine_lo.x) * m_fine_inv, fy = (p.y - m_fine_lo.y) * m_fine_inv;
-  if (!(fx >= 0 && fy >= 0 && fx < m_fine_n && fy < m_fine_n)) return -1;
-  return m_fine[size_t(int(fy)) * size_t(m_fine_n) + size_t(int(fx))];
+  const double fx = (p.x - t.lo.x) * t.inv, fy = (p.y - t.lo.y) * t.inv;
+  if (!(fx >= 0 && fy >= 0 && fx < t.n && fy < t.n)) return -1;
+  return t.cells[size_t(int(fy)) * size_t(t.n) + size_t(int(fx))];
 }
 
 DirWeights DirectionInterpolator::weights(const Vec3& dir) const {
   // The common case inline and short (one branch); the rest out of line (table_miss).
+  const FineTable& ft = fine();
   const Vec2 p = to_parabolic(dir);
-  const int c = table_entry(p);  // -1 for an empty interpolator (no table)
-  if (c < 0) return table_miss(p, c);
+  const int c = table_entry(ft, p);  // -1 for an empty interpolator (no table)
+  if (c < 0) return table_miss(ft, p, c);
   // bary() on the triangle's own copy of its points: the same doubles, one dependent load less.
-  const CornerTri& t = m_corner_tris[size_t(c)];
+  const CornerTri& t = ft.corner_tris[size_t(c)];
   return make_weights(t.index, {cross(t.b, t.c, p), cross(t.c, t.a, p), cross(t.a, t.b, p)});
 }
 
-[[gnu::noinline]] DirWeights DirectionInterpolator::table_miss(const Vec2& p, int c) const {
+[[gnu::noinline]] DirWeights DirectionInterpolator::table_miss(const FineTable& ft, const Vec2& p, int c) const {
   if (c <= k_multi_base) {
     // Candidates in the search's order: the first that accepts p is what the search returns; if
     // none does, the search goes on past them (to candidates that reject p) to the hull.
     for (int k = 0; k < k_multi; ++k) {
-      const int ti = m_multi[size_t(k_multi_base - c) * k_multi + size_t(k)];
+      const int ti = ft.multi[size_t(k_multi_base - c) * k_multi + size_t(k)];
       if (ti < 0) break;
       const auto& t = m_tris[size_t(ti)];
       const std::array<double, 3> w = bary(m_pts, t, p);
@@ -550,8 +567,8 @@ DirWeights DirectionInterpolator::weights(const Vec3& dir) const {
   }
   if (c < -1) {
     HullHit h;
-    for (int k = m_out_start[size_t(-2 - c)]; k < m_out_start[size_t(-1 - c)]; ++k) {
-      const auto& e = m_hull[size_t(m_out_edges[size_t(k)])];
+    for (int k = ft.out_start[size_t(-2 - c)]; k < ft.out_start[size_t(-1 - c)]; ++k) {
+      const auto& e = m_hull[size_t(ft.out_edges[size_t(k)])];
       h.add(m_pts[size_t(e[0])], m_pts[size_t(e[1])], e[0], e[1], p);
     }
     return make_weights({h.ia, h.ib, h.ia}, {1 - h.u, h.u, 0});
@@ -562,7 +579,7 @@ DirWeights DirectionInterpolator::weights(const Vec3& dir) const {
 
 int DirectionInterpolator::fast_path_kind(const Vec3& dir) const {
   if (m_pts.empty()) return 0;
-  const int c = table_entry(to_parabolic(dir));
+  const int c = table_entry(fine(), to_parabolic(dir));
   return c >= 0 ? 1 : c <= k_multi_base ? 3 : c < -1 ? 2 : 0;
 }
 

@@ -16,7 +16,10 @@
 //  - weights() returns exactly (bit for bit) what weights_reference() returns, for every input.
 #pragma once
 #include <array>
+#include <atomic>
 #include <cstdint>
+#include <memory>
+#include <mutex>
 #include <vector>
 
 #include "core/btf.h"
@@ -53,7 +56,7 @@ class DirectionInterpolator {
     double cell = 0;
     int n = 0;
   };
-  FineGrid fine_grid() const { return {m_fine_lo, m_fine_n > 0 ? 1 / m_fine_inv : 0, m_fine_n}; }
+  FineGrid fine_grid() const;
   // Triangles as index triples into the direction set (empty for degenerate sets).
   const std::vector<std::array<int, 3>>& triangles() const { return m_tris; }
 
@@ -71,27 +74,39 @@ class DirectionInterpolator {
   // bounding box widened on every side (grazing queries beyond the hull land in it too). A cell
   // holds t >= 0 when the reference search returns triangle t for every point of the cell;
   // -2 - k when it returns the projection onto one of the hull edges in list k (CSR, m_hull
-  // indices); k_multi_base - k when it returns the first of up to k_multi candidates (m_multi,
+  // indices); k_multi_base - k when it returns the first of up to k_multi candidates (multi,
   // -1 padded) that holds the point, for a cell across a triangle edge; -1 when undecided.
   static constexpr int k_multi = 4, k_list_count = 16383, k_multi_count = 16383;
   static constexpr int k_multi_base = -2 - k_list_count;
   static constexpr int k_fine_max = 384, k_block = 4;  // table side limit; build block size
-  Vec2 m_fine_lo;
-  double m_fine_inv = 0;
-  int m_fine_n = 0;
-  std::vector<int16_t> m_fine, m_multi;
   struct CornerTri {
     Vec2 a, b, c;  // m_pts[index[0..2]]
     std::array<int, 3> index;
   };
-  std::vector<CornerTri> m_corner_tris;  // by triangle
-  std::vector<int> m_out_start;
-  std::vector<int16_t> m_out_edges;
+  struct FineTable {
+    Vec2 lo;
+    double inv = 0;
+    int n = 0;  // 0: no table
+    std::vector<int16_t> cells, multi;
+    std::vector<CornerTri> corner_tris;  // by triangle
+    std::vector<int> out_start;
+    std::vector<int16_t> out_edges;
+  };
+  // The table is built on the first weights() call, not with the interpolator: it takes 10-30 ms,
+  // and most interpolators (one per model load, per relight call...) never answer a direction
+  // query. Copies share it (same directions, same table).
+  struct LazyTable {
+    std::once_flag once;
+    std::atomic<bool> ready{false};  // the fast path's check: call_once is a libc call each time
+    FineTable table;
+  };
+  std::shared_ptr<LazyTable> m_lazy;  // null: no table (empty or degenerate set)
+  const FineTable& fine() const;
 
   DirWeights weights_at(const Vec2& p) const;  // the reference search for a parabolic point
-  int table_entry(const Vec2& p) const;        // -1 when p is not in the table
-  DirWeights table_miss(const Vec2& p, int entry) const;  // weights() for an entry < 0
-  void build_fine_table();
+  static int table_entry(const FineTable& t, const Vec2& p);  // -1 when p is not in the table
+  DirWeights table_miss(const FineTable& t, const Vec2& p, int entry) const;  // weights() for an entry < 0
+  void build_fine_table(FineTable& t) const;
 };
 
 }  // namespace btfc
