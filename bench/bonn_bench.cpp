@@ -12,20 +12,20 @@
 //
 //   bench_bonn [--width 400] [--height 400] [--rank 100] [--lines 4] [--blocks N (0 = all)]
 //              [--file /tmp/bench_ubo2014.btf] [--keep]
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <random>
 #include <string>
 
+#include "bench/bench_timing.h"
 #include "codecs/fmf/fmf.h"
 #include "core/cl_runtime.h"
 #include "formats/bonn/bonn_btf.h"
 
 using namespace btfc;
 
-static double now_s() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+using btfc::bench::now_s;
 
 int main(int argc, char** argv) {
   int width = 400, height = 400, rank = 100, lines = 4, blocks = 0;

@@ -5,7 +5,6 @@
 // Factors: random, UBO2003 directions (81 x 81, 19683 rgb rows), `--texels` texels, rank C.
 // Interpolated queries get their 3 + 3 (index, weight) pairs from core/interp.h beforehand, as a
 // renderer reads them from its index / weight textures; that host cost is reported separately.
-#include <chrono>
 #include <cstdio>
 #include <cstring>
 #include <random>
@@ -13,24 +12,15 @@
 
 #include <Eigen/Core>
 
+#include "bench/bench_timing.h"
 #include "codecs/fmf/fmf_cl.h"
 #include "core/cl_runtime.h"
 #include "core/interp.h"
 
 using namespace btfc;
 
-static double now_s() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
-
-template <class F>
-static double best_of(int reps, F&& f) {
-  double best = 1e30;
-  for (int i = 0; i < reps; ++i) {
-    double t = now_s();
-    f();
-    best = std::min(best, now_s() - t);
-  }
-  return best;
-}
+using btfc::bench::best_of;
+using btfc::bench::now_s;
 
 int main(int argc, char** argv) {
   int texels = 65536, C = 32;

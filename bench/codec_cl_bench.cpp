@@ -8,11 +8,11 @@
 // relighting: 256 x 256 texels.
 // lpyr: one reduce + subtract_up of a side x side level with 81 x 81 values per texel.
 #include <Eigen/Core>
-#include <chrono>
 #include <cstdio>
 #include <random>
 #include <string>
 
+#include "bench/bench_timing.h"
 #include "codecs/lpca/lpca_cl.h"
 #include "codecs/lpyr/lpyr_cl.h"
 #include "codecs/lpyr/lpyr_internal.h"
@@ -20,18 +20,8 @@
 
 using namespace btfc;
 
-static double now_s() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
-
-template <class F>
-static double best_of(int reps, F&& f) {
-  double best = 1e30;
-  for (int i = 0; i < reps; ++i) {
-    double t = now_s();
-    f();
-    best = std::min(best, now_s() - t);
-  }
-  return best;
-}
+using btfc::bench::best_of;
+using btfc::bench::now_s;
 
 static void report(const char* name, double t_cl, double t_ref, double units, const char* unit) {
   std::printf("%-26s PoCL %9.2f %s/s   C++ reference %9.2f %s/s   PoCL / C++ = %.2f\n", name, units / t_cl, unit, units / t_ref,

@@ -12,12 +12,12 @@
 //   - a coherent stream (frames of all texels under one direction pair) through eval_batch.
 //
 //   bench_eval [--texels 65536] [--rank 32] [--queries 4000000]
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <random>
 #include <string>
 
+#include "bench/bench_timing.h"
 #include "codecs/fmf/fmf_cl.h"
 #include "codecs/fmf/fmf_eval.h"
 #include "codecs/fmf/fmf_model.h"
@@ -26,18 +26,8 @@
 
 using namespace btfc;
 
-static double now_s() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
-
-template <class F>
-static double best_of(int reps, F&& f) {
-  double best = 1e30;
-  for (int i = 0; i < reps; ++i) {
-    double t = now_s();
-    f();
-    best = std::min(best, now_s() - t);
-  }
-  return best;
-}
+using btfc::bench::best_of;
+using btfc::bench::now_s;
 
 int main(int argc, char** argv) {
   int texels = 65536, C = 32;

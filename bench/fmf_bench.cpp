@@ -16,13 +16,13 @@
 //             [--dump-only]  (with --dump: stop after writing the file)
 #include <sys/resource.h>
 
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <string>
 #include <vector>
 
+#include "bench/bench_timing.h"
 #include "codecs/codec.h"
 #include "core/svd.h"
 #include "core/cl_runtime.h"
@@ -31,9 +31,7 @@
 
 using namespace btfc;
 
-static double now_s() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
+using btfc::bench::now_s;
 static double peak_rss_gb() {
   rusage ru{};
   getrusage(RUSAGE_SELF, &ru);

@@ -4,18 +4,18 @@
 //
 //   bench_interp [--queries 4000000] [--theta-max 80] [--set ubo2003|ubo2014]
 // Also prints, per kind of answer (fast_path_kind), its share and cost, and the constructor's time.
-#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <random>
 #include <string>
 #include <vector>
 
+#include "bench/bench_timing.h"
 #include "core/interp.h"
 
 using namespace btfc;
 
-static double now_s() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+using btfc::bench::now_s;
 
 // Best of `reps` runs of f over all queries, in ns per call; `sink` keeps the results alive.
 template <class F>

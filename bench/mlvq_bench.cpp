@@ -14,12 +14,12 @@
 //   bench_mlvq [--width 64] [--height 64] [--codec mlvq:scheme=2] [--input BTF] [--crop x,y,w,h]
 //              [--queries 4000000] [--write-ref ref.btfc] [--write-decoded dec.btfc]
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <random>
 #include <string>
 
+#include "bench/bench_timing.h"
 #include "codecs/codec.h"
 #include "core/blas_env.h"
 #include "core/container.h"
@@ -29,7 +29,7 @@
 
 using namespace btfc;
 
-static double now_s() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+using btfc::bench::now_s;
 
 int main(int argc, char** argv) {
   reexec_for_openblas(argc, argv);
