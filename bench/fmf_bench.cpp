@@ -87,14 +87,16 @@ int main(int argc, char** argv) {
     return r->rel_error_estimate();
   };
   if (!load.empty()) {
-    // A --dump file: m x n column-major float32, read into one buffer (the input of the peak RSS ratio).
+    // A --dump file: m x n column-major float32, read into one buffer (the input of the peak RSS
+    // ratio), of the kind a Btf holds (FloatBuffer: 2 MiB-aligned, huge pages requested), so the
+    // passes see the TLB behaviour of the codec's own input.
     std::FILE* f = std::fopen(load.c_str(), "rb");
     if (!f) return 2;
     std::fseek(f, 0, SEEK_END);
     const size_t bytes = size_t(std::ftell(f));
     std::fseek(f, 0, SEEK_SET);
     const size_t m = load_rows, n = std::min(bytes / 4 / m, load_texels ? load_texels : bytes);
-    std::vector<float> B(m * n);
+    FloatBuffer B(m * n);
     if (std::fread(B.data(), 4, B.size(), f) != B.size()) return 2;
     std::fclose(f);
     const double input_gb = double(B.size()) * 4 / 1e9;

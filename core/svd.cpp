@@ -1,6 +1,8 @@
 // Truncated SVD for fmf; see svd.h for the contract and the choice of paths.
 #include "core/svd.h"
 
+#include "core/thin_product.h"
+
 #include <Eigen/Dense>
 #include <algorithm>
 #include <climits>
@@ -8,14 +10,13 @@
 #include <cstddef>
 #include <cstring>
 #include <list>
+#include <memory>
+#include <new>
 #include <mutex>
 #include <random>
 #include <vector>
 
-#if defined(__x86_64__) && defined(__GNUC__)
-#include <immintrin.h>
-#define BTFC_THIN_TN_AVX512 1
-#endif
+#include <sys/mman.h>
 
 #ifdef BTFC_HAVE_OPENBLAS
 // LAPACK's symmetric divide-and-conquer eigensolver, in OpenBLAS (Fortran: the trailing hidden
@@ -43,13 +44,7 @@ constexpr double k_rel_sigma_floor = 1e-6;  // float data: smaller singular valu
 // All eigenpairs, sorted by descending eigenvalue.
 void sorted_eigen(const MatrixXd& G, Eigen::VectorXd& lambda, MatrixXd& vecs) { top_eigenpairs(G, G.rows(), lambda, vecs); }
 
-double frobenius2(ConstMapF& B) {
-  double total = 0;
-  const Index n = B.cols();
-#pragma omp parallel for reduction(+ : total) schedule(static)
-  for (Index j = 0; j < n; ++j) total += B.col(j).cast<double>().squaredNorm();
-  return total;
-}
+double frobenius2(ConstMapF& B) { return squared_norm(B.data(), size_t(B.size())); }
 
 // ExactSvdReuse's store: the eigendecompositions of the last few Gram matrices, by fingerprint.
 struct GramEigen {
@@ -176,97 +171,23 @@ Result<SvdResult> exact_svd(ConstMapF& B, const SvdOptions& opt) {
   return r;
 }
 
-// Z = B^T Y for the passes of the randomized SVD: B m x n column-major (the data, never copied),
-// Y m x l, l <= ~150. OpenBLAS runs this shape (65536 x 19683 times 19683 x 48) at about a third
-// of the machine's SGEMM rate: it packs B, the large operand, for a product of only l columns.
-// This kernel reads B once, in place: 8 texel columns at a time, their values broadcast against
-// a row of Y (row-major, l values = NV zmm registers) into 8 x NV accumulators, with the rows in
-// chunks whose slice of Y stays in L2. Measured at 1.7-2.4x OpenBLAS's rate for this product on
-// the 2 cores (docs/benchmarks.md). AVX-512 only, chosen at run time (the default build is
-// portable); elsewhere the product stays an Eigen (OpenBLAS) GEMM. Each output is one
-// sequential sum per lane over the rows, so results do not depend on the thread count.
-#ifdef BTFC_THIN_TN_AVX512
-template <int NV, int TJ>
-__attribute__((target("avx512f"))) void thin_tn_tile_avx512(const float* B, size_t ldb, const float* Yr, size_t k0, size_t k1,
-                                                            size_t j0, float* Zr, bool first) {
-  constexpr int L = 16 * NV;
-  __m512 acc[TJ][NV];
-  for (int t = 0; t < TJ; ++t)
-    for (int v = 0; v < NV; ++v) acc[t][v] = first ? _mm512_setzero_ps() : _mm512_loadu_ps(Zr + (j0 + t) * L + 16 * v);
-  const float* col[TJ];
-  for (int t = 0; t < TJ; ++t) col[t] = B + (j0 + t) * ldb;
-  for (size_t k = k0; k < k1; ++k) {
-    __m512 y[NV];
-    for (int v = 0; v < NV; ++v) y[v] = _mm512_loadu_ps(Yr + k * L + 16 * v);
-    for (int t = 0; t < TJ; ++t) {
-      const __m512 b = _mm512_set1_ps(col[t][k]);
-      for (int v = 0; v < NV; ++v) acc[t][v] = _mm512_fmadd_ps(b, y[v], acc[t][v]);
-    }
-  }
-  for (int t = 0; t < TJ; ++t)
-    for (int v = 0; v < NV; ++v) _mm512_storeu_ps(Zr + (j0 + t) * L + 16 * v, acc[t][v]);
+// The passes' products (core/thin_product.h), on the mapped data.
+void product_bt(ConstMapF& B, const MatrixXf& Y, MatrixXf& Z, double* energy = nullptr) {
+  transposed_product(B.data(), size_t(B.rows()), size_t(B.cols()), Y, Z, energy);
 }
-
-// Yr: m x 16 NV row-major (zero-padded columns); Zr: n x 16 NV row-major.
-template <int NV>
-void thin_tn(const float* B, size_t m, size_t n, const float* Yr, float* Zr) {
-  constexpr int TJ = std::min(16, (31 - NV) / NV);  // TJ x NV accumulators + NV of Y + 1 broadcast <= 32 registers
-  constexpr size_t k_rows = 2048;   // a chunk of Y's rows: 2048 x 16 NV floats, in L2
-  constexpr size_t k_texels = 64;   // texels per parallel task
-  const int64_t tasks = int64_t((n + k_texels - 1) / k_texels);
-#pragma omp parallel for schedule(dynamic, 1)
-  for (int64_t s = 0; s < tasks; ++s) {
-    const size_t j0 = size_t(s) * k_texels, j1 = std::min(n, j0 + k_texels);
-    for (size_t k0 = 0; k0 < m; k0 += k_rows) {
-      const size_t k1 = std::min(m, k0 + k_rows);
-      size_t j = j0;
-      for (; j + TJ <= j1; j += TJ) thin_tn_tile_avx512<NV, TJ>(B, m, Yr, k0, k1, j, Zr, k0 == 0);
-      for (; j < j1; ++j) thin_tn_tile_avx512<NV, 1>(B, m, Yr, k0, k1, j, Zr, k0 == 0);
-    }
-  }
-}
-
-bool have_avx512() {
-  static const bool yes = [] {
-    __builtin_cpu_init();
-    return __builtin_cpu_supports("avx512f");
-  }();
-  return yes;
-}
-#endif
+void product_b(ConstMapF& B, const MatrixXf& X, MatrixXf& Y) { thin_product(B.data(), size_t(B.rows()), size_t(B.cols()), X, Y); }
 
 }  // namespace
 
-void product_bt(ConstMapF& B, const MatrixXf& Y, MatrixXf& Z) {
-#ifdef BTFC_THIN_TN_AVX512
-  const Index l = Y.cols(), nv = (l + 15) / 16;
-  if (have_avx512() && nv >= 1 && nv <= 8) {
-    const Index m = B.rows(), n = B.cols(), L = 16 * nv;
-    MatrixXfR Yr = MatrixXfR::Zero(m, L), Zr(n, L);
-    Yr.leftCols(l) = Y;
-    using Fn = void (*)(const float*, size_t, size_t, const float*, float*);
-    static constexpr Fn k_fns[8] = {thin_tn<1>, thin_tn<2>, thin_tn<3>, thin_tn<4>, thin_tn<5>, thin_tn<6>, thin_tn<7>, thin_tn<8>};
-    k_fns[nv - 1](B.data(), size_t(m), size_t(n), Yr.data(), Zr.data());
-    Z = Zr.leftCols(l);
-    return;
-  }
-#endif
-  Z.noalias() = B.transpose() * Y;
-}
-
-void transposed_product(const float* B, size_t m, size_t n, const Eigen::MatrixXf& Y, Eigen::MatrixXf& Z) {
-  ConstMapF map(B, Index(m), Index(n));
-  product_bt(map, Y, Z);
-}
-
 namespace {
 
-// Orthonormal basis of the columns of Y (thin Householder QR in double for stability).
+void orthonormalize_against(const Eigen::Ref<const MatrixXd>& P, Index used, Eigen::Ref<MatrixXd> X);
+
+// Orthonormal basis of the columns of Y (in double for stability).
 MatrixXf orthonormalize(const MatrixXf& Y) {
   MatrixXd Yd = Y.cast<double>();
-  Eigen::HouseholderQR<MatrixXd> qr(Yd);
-  MatrixXd Q = qr.householderQ() * MatrixXd::Identity(Y.rows(), Y.cols());
-  return Q.cast<float>();
+  orthonormalize_against(MatrixXd(), 0, Yd);
+  return Yd.cast<float>();
 }
 
 // Gaussian test matrix (rows x cols) from a seeded engine: Box-Muller on raw 64-bit draws so
@@ -298,7 +219,8 @@ Result<SvdResult> power_svd(ConstMapF& B, const SvdOptions& opt) {
   r.total_energy = frobenius2(B);
   step();
 
-  MatrixXf Y = B * Omega;  // m x l
+  MatrixXf Y;
+  product_b(B, Omega, Y);  // m x l
   Omega.resize(0, 0);
   step();
   MatrixXf Q = orthonormalize(Y);
@@ -307,7 +229,7 @@ Result<SvdResult> power_svd(ConstMapF& B, const SvdOptions& opt) {
     product_bt(B, Q, Z);  // n x l
     step();
     Z = orthonormalize(Z);
-    Y.noalias() = B * Z;
+    product_b(B, Z, Y);
     step();
     Q = orthonormalize(Y);
   }
@@ -331,11 +253,30 @@ Result<SvdResult> power_svd(ConstMapF& B, const SvdOptions& opt) {
 
 
 
+// One Cholesky QR round: X := X R^-1 with R^T R = X^T X (a BLAS-3 product and a triangular
+// solve, in double). False, X unchanged, when the Gram matrix is not numerically positive
+// definite or R's diagonal spans more than 1e5 (cond(X)^2 u would then lose orthogonality
+// beyond what a second round restores): the caller falls back to Householder.
+bool cholesky_qr_round(Eigen::Ref<MatrixXd> X) {
+  const Index l = X.cols();
+  MatrixXd G = MatrixXd::Zero(l, l);
+  G.selfadjointView<Eigen::Lower>().rankUpdate(X.transpose());
+  Eigen::LLT<MatrixXd> llt(G);
+  if (llt.info() != Eigen::Success) return false;
+  const Eigen::VectorXd d = llt.matrixLLT().diagonal();
+  if (!(d.minCoeff() > 1e-5 * d.maxCoeff())) return false;
+  llt.matrixU().solveInPlace<Eigen::OnTheRight>(X);
+  return true;
+}
+
 // X := an orthonormal basis of X's columns orthogonal to P's: block classical Gram-Schmidt and
-// Householder QR, twice ("twice is enough"; the second round after normalising, so a block that
-// is noise after the projection, as when the Krylov space has exhausted B's range, is still made
-// orthogonal to P to round-off). The projections are n x (used) x l double GEMMs.
-void orthonormalize_against(const MatrixXd& P, Index used, MatrixXd& X) {
+// QR, twice ("twice is enough"; the second round after normalising, so a block that is noise
+// after the projection, as when the Krylov space has exhausted B's range, is still made
+// orthogonal to P to round-off). The projections are n x (used) x l double GEMMs. The QR is
+// Cholesky QR (CholeskyQR2 over the two rounds: 10-20x faster than Householder for 65536 x 48,
+// whose unblocked reflectors were a third of a Krylov run's time), Householder where a round's
+// Gram matrix is too ill-conditioned (rank-deficient or exhausted blocks, zero data).
+void orthonormalize_against(const Eigen::Ref<const MatrixXd>& P, Index used, Eigen::Ref<MatrixXd> X) {
   auto project = [&] {
     if (used == 0) return;
     const auto Pu = P.leftCols(used);
@@ -343,15 +284,14 @@ void orthonormalize_against(const MatrixXd& P, Index used, MatrixXd& X) {
     X.noalias() -= Pu * C;
   };
   auto qr = [&] {
+    if (cholesky_qr_round(X)) return;
     Eigen::HouseholderQR<MatrixXd> h(X);
     X = h.householderQ() * MatrixXd::Identity(X.rows(), X.cols());
   };
   project();
   qr();
-  if (used > 0) {
-    project();
-    qr();
-  }
+  project();
+  qr();
 }
 
 // Randomized block Krylov SVD (Musco and Musco 2015; the Ritz step of Halko et al. 2011,
@@ -369,43 +309,74 @@ void orthonormalize_against(const MatrixXd& P, Index used, MatrixXd& X) {
 // before the basis would exceed the small side of B.
 constexpr double k_krylov_stop = 2e-3;
 
+// A column-major double matrix in 2 MiB-aligned memory with transparent huge pages requested
+// (madvise): the Krylov basis and B P are the SVD's largest buffers (65536 x 96 doubles at rank
+// 32), and first touching fresh 4 KiB pages costs 2-3 ms per MB on the VMs measured, huge
+// pages 0.05-1 ms (docs/benchmarks.md). Not zeroed.
+class PageMatrix {
+ public:
+  PageMatrix(Index rows, Index cols) : m_p(alloc(size_t(rows) * size_t(cols))), map(m_p.get(), rows, cols) {}
+  Eigen::Map<MatrixXd>& operator*() { return map; }
+
+ private:
+  struct Free {
+    void operator()(double* p) const { std::free(p); }
+  };
+  static double* alloc(size_t count) {
+    const size_t k_align = size_t(2) << 20, bytes = std::max<size_t>(1, (count * sizeof(double) + k_align - 1) / k_align) * k_align;
+    void* p = std::aligned_alloc(k_align, bytes);
+    if (!p) throw std::bad_alloc();
+    madvise(p, bytes, MADV_HUGEPAGE);  // a hint; failure only costs speed
+    return static_cast<double*>(p);
+  }
+  std::unique_ptr<double, Free> m_p;
+  Eigen::Map<MatrixXd> map;
+};
+
 Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
   const Index m = B.rows(), n = B.cols(), small = std::min(m, n);
   const Index l = std::min<Index>(small, Index(opt.max_rank) + opt.oversample);
   const int max_blocks = std::max(1, int(std::min<Index>(opt.power_iters + 1, std::max<Index>(1, small / l))));
-  if (opt.progress) opt.progress->start("fmf randomized SVD (block Krylov)", uint64_t(2 * max_blocks + 1));
+  if (opt.progress) opt.progress->start("fmf randomized SVD (block Krylov)", uint64_t(2 * max_blocks));
   auto step = [&] { if (opt.progress) opt.progress->advance(); };
   SvdResult r;
   r.method = "randomized";
   r.requested_rank = opt.max_rank;
-  r.total_energy = frobenius2(B);
-  step();
 
+  // Every buffer is allocated once: fresh memory costs its page faults (1.3-3 ms per MB on the
+  // VMs measured, docs/benchmarks.md), a sizeable part of a pass's time.
   const Index width = Index(max_blocks) * l;
-  MatrixXd P(n, width);   // the orthonormal Krylov basis, l columns per block
-  MatrixXd Ys(m, width);  // B P, block by block (double: the stopping test and the Ritz step need it)
+  PageMatrix p_buf(n, width), ys_buf(m, width);
+  auto& P = *p_buf;   // the orthonormal Krylov basis, l columns per block
+  auto& Ys = *ys_buf;  // B P, block by block (double: the stopping test and the Ritz step need it)
   MatrixXd G(width, width);  // Ys^T Ys, grown block by block
   MatrixXf Y = gaussian(m, l, opt.seed), Xf, Z;
-  MatrixXd X;
   int blocks = 0;
+  Index g_cols = 0;  // columns of G filled
   double last_err = -1;
+  auto grow_gram = [&](Index w) {  // G's columns [g_cols, w) from Ys
+    const Index add = w - g_cols;
+    G.block(0, g_cols, w, add).noalias() = Ys.leftCols(w).transpose() * Ys.middleCols(g_cols, add);
+    G.block(g_cols, 0, add, g_cols) = G.block(0, g_cols, g_cols, add).transpose();
+    g_cols = w;
+  };
   while (blocks < max_blocks) {
     const Index used = Index(blocks) * l, w = used + l;
-    product_bt(B, Y, Z);  // n x l
+    // The first pass also sums ||B||_F^2 (no separate pass over B).
+    product_bt(B, Y, Z, blocks == 0 ? &r.total_energy : nullptr);  // n x l
     step();
+    auto X = P.middleCols(used, l);
     X = Z.cast<double>();
     orthonormalize_against(P, used, X);
-    P.middleCols(used, l) = X;
     Xf = X.cast<float>();
-    Y.noalias() = B * Xf;  // m x l
+    product_b(B, Xf, Y);  // m x l
     step();
     Ys.middleCols(used, l) = Y.cast<double>();
     ++blocks;
     if (blocks == max_blocks) break;
     // Error-driven stop: the rank-C error of the current basis, from the eigenvalues of
     // (B P)^T B P (in double: the residual is a small difference of large sums).
-    G.block(0, used, w, l).noalias() = Ys.leftCols(w).transpose() * Ys.middleCols(used, l);
-    G.block(used, 0, l, used) = G.block(0, used, used, l).transpose();
+    grow_gram(w);
     Eigen::SelfAdjointEigenSolver<MatrixXd> es(G.topLeftCorner(w, w), Eigen::EigenvaluesOnly);
     const Index c = std::min<Index>(opt.max_rank, w);
     const double kept = es.eigenvalues().tail(c).cwiseMax(0.0).sum();
@@ -413,11 +384,35 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
     if (blocks >= 2 && last_err - err <= k_krylov_stop * err) break;
     last_err = err;
   }
-  Y.resize(0, 0), Z.resize(0, 0), G.resize(0, 0);
+  Y.resize(0, 0), Z.resize(0, 0), Xf.resize(0, 0);
   const Index w = Index(blocks) * l;
-  // Ritz step: B P = Qy R (Householder, double), then the SVD of the small R.
+  r.iterations = blocks;
+  // Ritz step, B ~ (B P) P^T: the SVD of B P = Ys. Fast path: from the eigenpairs of the Gram
+  // matrix G = Ys^T Ys = Vr S^2 Vr^T (mostly computed already for the stopping test), U = Ys Vr
+  // S^-1. Its round-off in U grows like u (s_1 / s_C)^2, so it is taken only while the smallest
+  // kept singular value is above 1e-4 s_1 (U orthonormal to ~1e-8); otherwise, and for
+  // rank-deficient data, the Householder QR of Ys (stable at any condition).
+  grow_gram(w);
+  {
+    Eigen::VectorXd lambda;
+    MatrixXd E;
+    top_eigenpairs(G.topLeftCorner(w, w), w, lambda, E);
+    int data_rank = 0;
+    bool reached = true;
+    const int rank = choose_rank(lambda, r.total_energy, opt, data_rank, reached);
+    if (lambda(0) > 0 && lambda(rank - 1) > 1e-8 * lambda(0)) {
+      r.data_rank_limit = data_rank, r.target_reached = reached;
+      r.S = lambda.head(rank).cwiseSqrt();
+      r.kept_energy = lambda.head(rank).sum();
+      const MatrixXd Vk = E.leftCols(rank);
+      r.U = (Ys.leftCols(w) * (Vk * r.S.cwiseInverse().asDiagonal())).cast<float>();
+      r.SxV = (P.leftCols(w) * (Vk * r.S.asDiagonal())).cast<float>();
+      if (opt.progress) opt.progress->finish();
+      return r;
+    }
+  }
+  G.resize(0, 0);
   Eigen::HouseholderQR<MatrixXd> qr(Ys.leftCols(w));
-  Ys.resize(0, 0);
   const MatrixXd R = qr.matrixQR().topRows(w).triangularView<Eigen::Upper>();
   Eigen::JacobiSVD<MatrixXd> svd(R, Eigen::ComputeFullU | Eigen::ComputeFullV);
   const Eigen::VectorXd lambda = svd.singularValues().array().square();
@@ -428,7 +423,6 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
   Ur.topRows(w) = svd.matrixU().leftCols(rank);
   r.U = (qr.householderQ() * Ur).cast<float>();
   r.SxV = (P.leftCols(w) * (svd.matrixV().leftCols(rank) * r.S.asDiagonal())).cast<float>();
-  r.iterations = blocks;
   if (opt.progress) opt.progress->finish();
   return r;
 }

@@ -78,10 +78,6 @@ void top_eigenpairs(const Eigen::MatrixXd& G, Eigen::Index l, Eigen::VectorXd& l
 // reached. Shared by truncated_svd and the out-of-core path (ooc_svd.h).
 int choose_rank(const Eigen::VectorXd& lambda, double total, const SvdOptions& opt, int& data_rank, bool& reached);
 
-// Z = B^T Y (n x l) for B m x n column-major and Y m x l: the randomized passes' product. On
-// CPUs with AVX-512 (checked at run time) a kernel that reads B in place (svd.cpp), for l <= 128;
-// else an Eigen (OpenBLAS) GEMM. Float sums, within GEMM round-off of each other.
-void transposed_product(const float* B, size_t m, size_t n, const Eigen::MatrixXf& Y, Eigen::MatrixXf& Z);
 
 // B is column-major with leading dimension m. Fails on m == 0 or n == 0.
 Result<SvdResult> truncated_svd(const float* B, size_t m, size_t n, const SvdOptions& opt);

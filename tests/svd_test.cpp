@@ -9,6 +9,7 @@
 #include <random>
 
 #include "core/svd.h"
+#include "core/thin_product.h"
 
 namespace btfc {
 namespace {
@@ -130,6 +131,33 @@ TEST(Svd, TransposedProductKernelEqualsTheReference) {
       EXPECT_LT((Z.cast<double>() - ref).cwiseAbs().maxCoeff(), 4e-7 * double(m)) << "m " << m << " l " << l;
     }
   }
+}
+
+TEST(Svd, ThinProductKernelEqualsTheReference) {
+  // Y = B X: both column-group widths (8, 12) and their padding, l past the kernel's 128 (the
+  // Eigen fallback), rows that leave a tail below the 32-row tile, more rows than one 1024-row
+  // task, texels past one 128-texel chunk, and fewer rows than a tile.
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<float> u(-1.f, 1.f);
+  for (auto [m, n] : {std::pair<size_t, size_t>{2500, 203}, {37, 70}, {20, 9}, {1024, 1}}) {
+    std::vector<float> b(m * n);
+    for (float& x : b) x = u(rng);
+    Eigen::Map<const Eigen::MatrixXf> B(b.data(), Eigen::Index(m), Eigen::Index(n));
+    for (int l : {1, 5, 8, 12, 13, 24, 33, 48, 80, 100, 128, 130}) {
+      Eigen::MatrixXf X(Eigen::Index(n), l), Y;
+      for (Eigen::Index i = 0; i < X.size(); ++i) X.data()[i] = u(rng);
+      thin_product(b.data(), m, n, X, Y);
+      const Eigen::MatrixXd ref = B.cast<double>() * X.cast<double>();
+      ASSERT_EQ(Y.rows(), Eigen::Index(m));
+      ASSERT_EQ(Y.cols(), l);
+      EXPECT_LT((Y.cast<double>() - ref).cwiseAbs().maxCoeff(), 4e-7 * double(n) + 1e-6) << "m " << m << " n " << n << " l " << l;
+    }
+  }
+  // The energy pass: the double sum of squares, over a length that is not a multiple of a block.
+  std::vector<float> v(3 * (size_t(1) << 20) + 7);
+  double ref = 0;
+  for (float& x : v) x = u(rng), ref += double(x) * double(x);
+  EXPECT_NEAR(squared_norm(v.data(), v.size()), ref, 1e-12 * ref);
 }
 
 TEST(Svd, LargeGramEigenpairsEqualEigensSolver) {

@@ -1,0 +1,29 @@
+// Thin products with a large float matrix B held in place: the passes of the randomized SVD
+// (core/svd.h) and of the out-of-core path. B is m x n column-major (leading dimension m), the
+// data itself, never copied or packed; the other operand has l columns, l small (~8-150).
+//
+// Why our own kernels: a general GEMM (OpenBLAS) packs B, the large operand, into its own
+// layout on every call, which for l = 32-80 columns is a large part of the product's time, and
+// its thread pool spins beside the OpenMP one (docs/benchmarks.md, "fmf factorization"). These
+// kernels read B once, stream it sequentially with software prefetch, and keep the small
+// operand in L1/L2. They are AVX-512 only, chosen at run time; elsewhere (another CPU, l > 128)
+// both are Eigen products (OpenBLAS when linked). Float sums in a fixed order per output, so a
+// result does not depend on the thread count; within GEMM round-off of the reference products.
+#pragma once
+#include <Eigen/Core>
+#include <cstddef>
+
+namespace btfc {
+
+// Z = B^T Y: Z n x l, Y m x l. With `energy`, also *energy = ||B||_F^2 (= squared_norm(B, m n)
+// to round-off; the kernel sums it during the pass, from cache).
+void transposed_product(const float* B, size_t m, size_t n, const Eigen::MatrixXf& Y, Eigen::MatrixXf& Z,
+                        double* energy = nullptr);
+
+// Y = B X: Y m x l, X n x l.
+void thin_product(const float* B, size_t m, size_t n, const Eigen::MatrixXf& X, Eigen::MatrixXf& Y);
+
+// ||B||_F^2 over `count` floats, summed in double (vectorized, parallel, fixed block order).
+double squared_norm(const float* B, size_t count);
+
+}  // namespace btfc
