@@ -111,6 +111,42 @@ TEST(Svd, BlockKrylovStopsEarlyOnAFastDecayAndHandlesExhaustedRanges) {
   EXPECT_NEAR(s->rel_error_estimate(), actual_rel_error(small, 50, 80, *s), 1e-3);
 }
 
+TEST(Svd, KrylovRitzStepHoldsAtAnyDynamicRange) {
+  // Singular values falling geometrically so that the kept ones span 1e-1 .. 1e-7 of sigma_1: the
+  // Ritz step takes the Gram eigenpairs while sigma_C > 1e-4 sigma_1 and the Householder QR of B P
+  // below that; both must give an orthonormal U, the data's singular values and the optimum error.
+  const size_t m = 300, n = 500;
+  const int C = 12;
+  for (double span : {1e-1, 1e-3, 1e-5, 1e-7}) {
+    std::mt19937_64 rng(11);
+    std::normal_distribution<double> g(0.0, 1.0);
+    const Eigen::Index k = Eigen::Index(m);
+    Eigen::MatrixXd A(m, k), D(n, k);
+    for (Eigen::Index i = 0; i < A.size(); ++i) A.data()[i] = g(rng);
+    for (Eigen::Index i = 0; i < D.size(); ++i) D.data()[i] = g(rng);
+    const Eigen::MatrixXd U = Eigen::HouseholderQR<Eigen::MatrixXd>(A).householderQ() * Eigen::MatrixXd::Identity(k, k);
+    const Eigen::MatrixXd V = Eigen::HouseholderQR<Eigen::MatrixXd>(D).householderQ() * Eigen::MatrixXd::Identity(Eigen::Index(n), k);
+    Eigen::VectorXd sigma(k);
+    const double q = std::pow(span, 1.0 / (C - 1));
+    for (Eigen::Index i = 0; i < k; ++i) sigma(i) = i < C ? std::pow(q, double(i)) : 1e-3 * span / (1.0 + double(i - C));
+    const Eigen::MatrixXf Bf = (U * sigma.asDiagonal() * V.transpose()).cast<float>();
+    const std::vector<float> b(Bf.data(), Bf.data() + Bf.size());
+    SvdOptions o;
+    o.max_rank = C, o.oversample = 8, o.power_iters = 3, o.method = SvdMethod::randomized;
+    auto r = truncated_svd(b.data(), m, n, o);
+    ASSERT_TRUE(r.ok());
+    const int kept = int(r->S.size());
+    // The numerical-rank floor (sigma > 1e-6 sigma_1) drops the smallest at span 1e-7.
+    EXPECT_EQ(kept, span < 1e-6 ? 10 : C) << span;
+    const Eigen::MatrixXd UtU = r->U.cast<double>().transpose() * r->U.cast<double>();
+    EXPECT_LT((UtU - Eigen::MatrixXd::Identity(kept, kept)).cwiseAbs().maxCoeff(), 1e-5) << span;
+    for (int i = 0; i < kept; ++i) EXPECT_NEAR(r->S(i), sigma(i), 1e-3 * sigma(i)) << span << " " << i;
+    const double optimum = std::sqrt(sigma.tail(k - kept).squaredNorm() / sigma.squaredNorm());
+    const double err = actual_rel_error(b, m, n, *r);
+    EXPECT_LE(err, 1.01 * optimum + 1e-6) << span;
+  }
+}
+
 TEST(Svd, TransposedProductKernelEqualsTheReference) {
   // Every register width (l up to 8 x 16 and a fallback beyond), texel counts that leave tails of
   // the 8- or 16-texel tiles, and more rows than one 2048-row chunk.
