@@ -7,6 +7,7 @@
 #include <random>
 
 #include "codecs/fmf/ooc_pass.h"
+#include "core/thin_product.h"
 
 namespace btfc::fmf {
 namespace {
@@ -60,7 +61,7 @@ Result<SvdResult> streaming_svd(const ChunkSource& src, const std::vector<size_t
       // Column sums in float (short), accumulated in double; serial: see ooc_pass.cpp.
       for (Index j = 0; j < Index(k); ++j) energy += double(B.col(j).squaredNorm());
       gaussian_rows(opt.seed, src.chunk_first(c), k, l, Om);
-      Yf.noalias() = B * Om;
+      thin_product(Bp, m, k, Om, Yf);
       Y += Yf.cast<double>();
     };
     BTFC_RETURN_IF_ERROR(run.pass(m * size_t(l) + 1, sketch, [&](double* d) {
@@ -77,9 +78,8 @@ Result<SvdResult> streaming_svd(const ChunkSource& src, const std::vector<size_t
     Y.setZero();
     MatrixXf Z, Yf;
     auto power = [&](size_t, const float* Bp, size_t k) {
-      Eigen::Map<const MatrixXf> B(Bp, Index(m), Index(k));
-      Z.noalias() = B.transpose() * Q;
-      Yf.noalias() = B * Z;
+      transposed_product(Bp, m, k, Q, Z);
+      thin_product(Bp, m, k, Z, Yf);
       Y += Yf.cast<double>();
     };
     BTFC_RETURN_IF_ERROR(run.pass(m * size_t(l), power, [&](double* d) { std::copy(Y.data(), Y.data() + Y.size(), d); }));
@@ -91,8 +91,8 @@ Result<SvdResult> streaming_svd(const ChunkSource& src, const std::vector<size_t
   std::vector<std::pair<size_t, MatrixXf>> wt;  // (chunk, rows of W^T)
   MatrixXd G = MatrixXd::Zero(l, l);
   auto project = [&](size_t c, const float* Bp, size_t k) {
-    Eigen::Map<const MatrixXf> B(Bp, Index(m), Index(k));
-    MatrixXf W = B.transpose() * Q;
+    MatrixXf W;
+    transposed_product(Bp, m, k, Q, W);
     G += (W.transpose() * W).cast<double>();
     wt.emplace_back(c, std::move(W));
   };
