@@ -309,6 +309,19 @@ void orthonormalize_against(const Eigen::Ref<const MatrixXd>& P, Index used, Eig
 // before the basis would exceed the small side of B.
 constexpr double k_krylov_stop = 2e-3;
 
+// out = A M (rows x cols, float) for a tall A, in blocks of rows: the double product of a
+// block at a time, so no rows x cols double temporary (its fresh pages cost more than the product).
+template <class A, class M>
+void rows_times(const A& a, const M& mat, MatrixXfR& out) {
+  constexpr Index k_rows = 4096;
+  MatrixXd block;
+  for (Index i = 0; i < a.rows(); i += k_rows) {
+    const Index h = std::min(k_rows, a.rows() - i);
+    block.noalias() = a.middleRows(i, h) * mat;
+    out.middleRows(i, h) = block.cast<float>();
+  }
+}
+
 // A column-major double matrix in 2 MiB-aligned memory with transparent huge pages requested
 // (madvise): the Krylov basis and B P are the SVD's largest buffers (65536 x 96 doubles at rank
 // 32), and first touching fresh 4 KiB pages costs 2-3 ms per MB on the VMs measured, huge
@@ -405,8 +418,10 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
       r.S = lambda.head(rank).cwiseSqrt();
       r.kept_energy = lambda.head(rank).sum();
       const MatrixXd Vk = E.leftCols(rank);
-      r.U = (Ys.leftCols(w) * (Vk * r.S.cwiseInverse().asDiagonal())).cast<float>();
-      r.SxV = (P.leftCols(w) * (Vk * r.S.asDiagonal())).cast<float>();
+      r.U.resize(m, rank);
+      r.SxV.resize(n, rank);
+      rows_times(Ys.leftCols(w), Vk * r.S.cwiseInverse().asDiagonal(), r.U);
+      rows_times(P.leftCols(w), Vk * r.S.asDiagonal(), r.SxV);
       if (opt.progress) opt.progress->finish();
       return r;
     }
