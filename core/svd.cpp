@@ -356,8 +356,8 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
   r.method = "randomized";
   r.requested_rank = opt.max_rank;
 
-  // Every buffer is allocated once: fresh memory costs its page faults (1.3-3 ms per MB on the
-  // VMs measured, docs/benchmarks.md), a sizeable part of a pass's time.
+  // Buffers are allocated once, the two largest with huge pages: fresh memory costs its page
+  // faults (1.3-3 ms per MB on the VMs measured, docs/benchmarks.md), a sizeable part of a pass.
   const Index width = Index(max_blocks) * l;
   PageMatrix p_buf(n, width), ys_buf(m, width);
   auto& P = *p_buf;   // the orthonormal Krylov basis, l columns per block
