@@ -77,7 +77,9 @@ template <int NV>
 void thin_tn(const float* B, size_t m, size_t n, const float* Yr, float* Zr, double* energy) {
   constexpr int TJ = std::min(16, (31 - NV) / NV);  // TJ x NV accumulators + NV of Y + 1 broadcast <= 32 registers
   constexpr size_t k_rows = 2048;   // a chunk of Y's rows: 2048 x 16 NV floats, in L2
-  constexpr size_t k_texels = 64;   // texels per parallel task
+  // Texels per parallel task: whole tiles only. With 64, NV 2 (TJ 14) left 8 texels of every
+  // task to one-column tiles and ran at 275 GFLOP/s instead of 375 (l = 32, docs/benchmarks.md).
+  constexpr size_t k_texels = 8 * TJ;
   const int64_t tasks = int64_t((n + k_texels - 1) / k_texels);
   std::vector<double> part(energy ? size_t(tasks) : 0, 0.0);
 #pragma omp parallel for schedule(dynamic, 1)
