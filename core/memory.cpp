@@ -2,12 +2,15 @@
 
 #include "core/limits.h"
 
+#include <sys/mman.h>
 #include <sys/resource.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <new>
 #include <sstream>
 
 namespace btfc {
@@ -19,6 +22,17 @@ Result<size_t> parse_size(const std::string& text, const std::string& what) {
   if (r.value() == 0) return invalid_argument(what + ": '" + text + "' is not a positive size (e.g. 512M, 2G)");
   return r;
 }
+
+void* page_alloc(size_t bytes) {
+  const size_t k_align = size_t(2) << 20;
+  const size_t size = std::max<size_t>(1, (bytes + k_align - 1) / k_align) * k_align;
+  void* p = std::aligned_alloc(k_align, size);
+  if (!p) throw std::bad_alloc();
+  madvise(p, size, MADV_HUGEPAGE);  // a hint; failure only costs speed
+  return p;
+}
+
+void PageFree::operator()(void* p) const { std::free(p); }
 
 uint64_t mem_available_bytes() {
   std::ifstream f("/proc/meminfo");

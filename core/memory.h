@@ -3,6 +3,7 @@
 #pragma once
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <string>
 
 #include "core/status.h"
@@ -24,5 +25,24 @@ uint64_t mem_available_bytes();
 
 // "1.50 GiB", "512.0 MiB" for messages.
 std::string format_bytes(uint64_t bytes);
+
+// Scratch memory for large temporaries (the SVD's basis, its products' staging copies): 2 MiB
+// aligned with transparent huge pages requested (madvise; a hint). Fresh 4 KiB pages cost 2-3 ms
+// per MB to fault on the VMs measured, huge pages 0.05-1 ms (docs/benchmarks.md, fmf section),
+// which for the 10-50 MB a pass allocates is a sizeable part of the pass. Not zeroed; throws
+// std::bad_alloc like a vector. Btf data has its own (FloatBuffer, core/btf.h, zeroed in parallel).
+void* page_alloc(size_t bytes);
+struct PageFree {
+  void operator()(void* p) const;
+};
+template <class T>
+class PageBuffer {
+ public:
+  explicit PageBuffer(size_t count) : m_p(static_cast<T*>(page_alloc(count * sizeof(T)))) {}
+  T* data() { return m_p.get(); }
+
+ private:
+  std::unique_ptr<T, PageFree> m_p;
+};
 
 }  // namespace btfc

@@ -1,6 +1,7 @@
 // Truncated SVD for fmf; see svd.h for the contract and the choice of paths.
 #include "core/svd.h"
 
+#include "core/memory.h"
 #include "core/thin_product.h"
 
 #include <Eigen/Dense>
@@ -10,13 +11,9 @@
 #include <cstddef>
 #include <cstring>
 #include <list>
-#include <memory>
-#include <new>
 #include <mutex>
 #include <random>
 #include <vector>
-
-#include <sys/mman.h>
 
 #ifdef BTFC_HAVE_OPENBLAS
 // LAPACK's symmetric divide-and-conquer eigensolver, in OpenBLAS (Fortran: the trailing hidden
@@ -322,27 +319,15 @@ void rows_times(const A& a, const M& mat, MatrixXfR& out) {
   }
 }
 
-// A column-major double matrix in 2 MiB-aligned memory with transparent huge pages requested
-// (madvise): the Krylov basis and B P are the SVD's largest buffers (65536 x 96 doubles at rank
-// 32), and first touching fresh 4 KiB pages costs 2-3 ms per MB on the VMs measured, huge
-// pages 0.05-1 ms (docs/benchmarks.md). Not zeroed.
+// A column-major double matrix in huge-page scratch memory (core/memory.h): the Krylov basis and
+// B P are the SVD's largest buffers (65536 x 96 doubles at rank 32). Not zeroed.
 class PageMatrix {
  public:
-  PageMatrix(Index rows, Index cols) : m_p(alloc(size_t(rows) * size_t(cols))), map(m_p.get(), rows, cols) {}
+  PageMatrix(Index rows, Index cols) : m_buf(size_t(rows) * size_t(cols)), map(m_buf.data(), rows, cols) {}
   Eigen::Map<MatrixXd>& operator*() { return map; }
 
  private:
-  struct Free {
-    void operator()(double* p) const { std::free(p); }
-  };
-  static double* alloc(size_t count) {
-    const size_t k_align = size_t(2) << 20, bytes = std::max<size_t>(1, (count * sizeof(double) + k_align - 1) / k_align) * k_align;
-    void* p = std::aligned_alloc(k_align, bytes);
-    if (!p) throw std::bad_alloc();
-    madvise(p, bytes, MADV_HUGEPAGE);  // a hint; failure only costs speed
-    return static_cast<double*>(p);
-  }
-  std::unique_ptr<double, Free> m_p;
+  PageBuffer<double> m_buf;
   Eigen::Map<MatrixXd> map;
 };
 

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "core/cpu_dispatch.h"
+#include "core/memory.h"
 
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <immintrin.h>
@@ -171,8 +172,10 @@ void transposed_product(const float* B, size_t m, size_t n, const Eigen::MatrixX
   const Index nv = (l + 15) / 16;
   if (have_avx512() && nv >= 1 && nv <= 8) {
     const Index L = 16 * nv;
-    MatrixXfR Yr = MatrixXfR::Zero(Index(m), L), Zr(Index(n), L);
+    PageBuffer<float> yr_buf(m * size_t(L)), zr_buf(n * size_t(L));
+    Eigen::Map<MatrixXfR> Yr(yr_buf.data(), Index(m), L), Zr(zr_buf.data(), Index(n), L);
     Yr.leftCols(l) = Y;
+    Yr.rightCols(L - l).setZero();
     using Fn = void (*)(const float*, size_t, size_t, const float*, float*, double*);
     static constexpr Fn k_fns[8] = {thin_tn<1>, thin_tn<2>, thin_tn<3>, thin_tn<4>, thin_tn<5>, thin_tn<6>, thin_tn<7>, thin_tn<8>};
     k_fns[nv - 1](B, m, n, Yr.data(), Zr.data(), energy);
@@ -193,10 +196,11 @@ void thin_product(const float* B, size_t m, size_t n, const Eigen::MatrixXf& X, 
   if (have_avx512() && l >= 1 && l <= 128 && m >= R) {
     // 12 or 8 columns per tile, whichever pads l less (12: fewer re-reads of B's tile).
     const Index cc = (l + 11) / 12 * 12 <= (l + 7) / 8 * 8 ? 12 : 8, lp = (l + cc - 1) / cc * cc;
-    MatrixXfR Xr(Index(n), lp);
+    PageBuffer<float> xr_buf(n * size_t(lp)), yp_buf(m * size_t(lp));
+    Eigen::Map<MatrixXfR> Xr(xr_buf.data(), Index(n), lp);
+    Eigen::Map<Eigen::MatrixXf> Yp(yp_buf.data(), Index(m), lp);
     Xr.leftCols(l) = X;
     Xr.rightCols(lp - l).setZero();
-    Eigen::MatrixXf Yp(Index(m), lp);
     if (cc == 12) thin_nn<2, 12>(B, m, n, Xr.data(), size_t(lp), Yp.data());
     else thin_nn<2, 8>(B, m, n, Xr.data(), size_t(lp), Yp.data());
     const Index mfull = Index(m / R * R), tail = Index(m) - mfull;
