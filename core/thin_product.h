@@ -20,7 +20,7 @@ namespace btfc {
 void transposed_product(const float* B, size_t m, size_t n, const Eigen::MatrixXf& Y, Eigen::MatrixXf& Z,
                         double* energy = nullptr);
 
-// Y = B X: Y m x l, X n x l.
+// Y = B X: Y m x l, X n x l. Y and X must be different matrices (Y is resized first).
 void thin_product(const float* B, size_t m, size_t n, const Eigen::MatrixXf& X, Eigen::MatrixXf& Y);
 
 // ||B||_F^2 over `count` floats, summed in double (vectorized, parallel, fixed block order).

@@ -189,6 +189,19 @@ TEST(Svd, ThinProductKernelEqualsTheReference) {
       EXPECT_LT((Y.cast<double>() - ref).cwiseAbs().maxCoeff(), 4e-7 * double(n) + 1e-6) << "m " << m << " n " << n << " l " << l;
     }
   }
+  // No texels: a zero product (the kernels' loops would leave their staging unwritten).
+  {
+    const std::vector<float> none;
+    Eigen::MatrixXf X(0, 48), Y;
+    thin_product(none.data(), 100, 0, X, Y);
+    ASSERT_EQ(Y.rows(), 100);
+    EXPECT_EQ(Y.cwiseAbs().maxCoeff(), 0.f);
+    Eigen::MatrixXf Yin = Eigen::MatrixXf::Ones(100, 48), Z;
+    double e = -1;
+    transposed_product(none.data(), 100, 0, Yin, Z, &e);
+    EXPECT_EQ(Z.rows(), 0);
+    EXPECT_EQ(e, 0.0);
+  }
   // The energy pass: the double sum of squares, over a length that is not a multiple of a block.
   std::vector<float> v(3 * (size_t(1) << 20) + 7);
   double ref = 0;
