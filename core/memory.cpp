@@ -25,7 +25,12 @@ Result<size_t> parse_size(const std::string& text, const std::string& what) {
 
 void* page_alloc(size_t bytes) {
   const size_t k_align = size_t(2) << 20;
-  const size_t size = std::max<size_t>(1, (bytes + k_align - 1) / k_align) * k_align;
+  if (bytes < k_align) {  // small: a huge page would be zeroed whole for a few KB
+    void* p = std::malloc(std::max<size_t>(1, bytes));
+    if (!p) throw std::bad_alloc();
+    return p;
+  }
+  const size_t size = (bytes + k_align - 1) / k_align * k_align;
   void* p = std::aligned_alloc(k_align, size);
   if (!p) throw std::bad_alloc();
   madvise(p, size, MADV_HUGEPAGE);  // a hint; failure only costs speed

@@ -29,7 +29,8 @@ std::string format_bytes(uint64_t bytes);
 // Scratch memory for large temporaries (the SVD's basis, its products' staging copies): 2 MiB
 // aligned with transparent huge pages requested (madvise; a hint). Fresh 4 KiB pages cost 2-3 ms
 // per MB to fault on the VMs measured, huge pages 0.05-1 ms (docs/benchmarks.md, fmf section),
-// which for the 10-50 MB a pass allocates is a sizeable part of the pass. Not zeroed; throws
+// which for the 10-50 MB a pass allocates is a sizeable part of the pass. Below 2 MiB plain
+// malloc (a huge page would be zeroed whole for a few KB). Not zeroed; throws
 // std::bad_alloc like a vector. Btf data has its own (FloatBuffer, core/btf.h, zeroed in parallel).
 void* page_alloc(size_t bytes);
 struct PageFree {
