@@ -35,7 +35,7 @@ bool have_avx512() {
 // NV zmm registers) into TJ x NV accumulators, with the rows in chunks whose slice of Y stays in
 // L2. Each column of B is then read sequentially, TJ streams at a time.
 template <int NV, int TJ>
-__attribute__((target("avx512f"))) void tn_tile(const float* B, size_t ldb, const float* Yr, size_t k0, size_t k1, size_t j0,
+__attribute__((target("avx512f"))) void tn_tile_avx512(const float* B, size_t ldb, const float* Yr, size_t k0, size_t k1, size_t j0,
                                                 float* Zr, bool first) {
   constexpr int L = 16 * NV;
   __m512 acc[TJ][NV];
@@ -91,12 +91,12 @@ void thin_tn(const float* B, size_t m, size_t n, const float* Yr, float* Zr, dou
       const size_t k1 = std::min(m, k0 + k_rows);
       size_t j = j0;
       for (; j + TJ <= j1; j += TJ) {
-        tn_tile<NV, TJ>(B, m, Yr, k0, k1, j, Zr, k0 == 0);
+        tn_tile_avx512<NV, TJ>(B, m, Yr, k0, k1, j, Zr, k0 == 0);
         if (energy)
           for (int t = 0; t < TJ; ++t) e += squares_avx512(B + (j + t) * m + k0, k1 - k0);
       }
       for (; j < j1; ++j) {
-        tn_tile<NV, 1>(B, m, Yr, k0, k1, j, Zr, k0 == 0);
+        tn_tile_avx512<NV, 1>(B, m, Yr, k0, k1, j, Zr, k0 == 0);
         if (energy) e += squares_avx512(B + j * m + k0, k1 - k0);
       }
     }
@@ -121,7 +121,7 @@ constexpr size_t k_nn_texels = 128;  // texels per chunk (X's slice, 128 x l flo
 constexpr size_t k_nn_ahead = 2;     // prefetch distance in row tiles
 
 template <int TK, int CC>
-__attribute__((target("avx512f"))) void nn_tile(const float* B, size_t ldb, const float* Xr, size_t lp, size_t k, size_t j0,
+__attribute__((target("avx512f"))) void nn_tile_avx512(const float* B, size_t ldb, const float* Xr, size_t lp, size_t k, size_t j0,
                                                 size_t j1, size_t c0, float* Y, size_t ldy, bool first, bool prefetch) {
   constexpr size_t R = 16 * TK;
   __m512 acc[TK][CC];
@@ -157,7 +157,7 @@ void thin_nn(const float* B, size_t m, size_t n, const float* Xr, size_t lp, flo
       const size_t j1 = std::min(n, j0 + k_nn_texels);
       for (size_t k = k0; k < k1; k += R) {
         const bool prefetch = k + (k_nn_ahead + 1) * R <= m;
-        for (size_t c0 = 0; c0 < lp; c0 += CC) nn_tile<TK, CC>(B, m, Xr, lp, k, j0, j1, c0, Yp, m, j0 == 0, prefetch && c0 == 0);
+        for (size_t c0 = 0; c0 < lp; c0 += CC) nn_tile_avx512<TK, CC>(B, m, Xr, lp, k, j0, j1, c0, Yp, m, j0 == 0, prefetch && c0 == 0);
       }
     }
   }

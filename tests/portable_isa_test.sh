@@ -2,7 +2,7 @@
 # A portable build (BTFC_NATIVE=OFF, the default) must run on the baseline x86-64 CPU: outside
 # the run-time dispatched functions (core/cpu_dispatch.h's clones "*.arch_x86_64_v3/v4", and the
 # functions named "*_f16c" / "*_avx512" compiled with a target attribute and called only after a
-# __builtin_cpu_supports check: the Bonn half conversions, core/svd.cpp's B^T Y kernel) no function of btfc's own binaries
+# __builtin_cpu_supports check: the Bonn half conversions, core/thin_product.cpp's kernels) no function of btfc's own binaries
 # may hold an instruction that needs more than SSE2: no AVX / AVX-512 (VEX / EVEX encoded, "v"
 # mnemonics, ymm / zmm registers), no BMI, no SSE4 / SSSE3. A stray -mavx2 on a file, an
 # intrinsic outside a dispatched function or a new -march flag fails here, on the build machine,
