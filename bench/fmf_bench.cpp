@@ -14,8 +14,11 @@
 //             texels, instead of synthesizing)
 //             [--scheme krylov|power] [--svd-only]  (randomized scheme; skip the codec run)
 //             [--dump-only]  (with --dump: stop after writing the file)
+//             [--dense-start]  (krylov: a Gaussian first block instead of the sparse sign sketch)
+//             [--seed 1]  (the test matrix's seed)
 #include <sys/resource.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -44,6 +47,8 @@ int main(int argc, char** argv) {
   bool reference = false, svd_only = false, dump_only = false;
   size_t load_rows = 19683, load_texels = 0;
   RandomizedScheme scheme = RandomizedScheme::block_krylov;
+  bool dense_start = false;
+  uint64_t seed = 1;
   std::string dump, codec_spec, load;
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
@@ -61,6 +66,8 @@ int main(int argc, char** argv) {
     else if (a == "--texels") load_texels = size_t(next());
     else if (a == "--svd-only") svd_only = true;
     else if (a == "--dump-only") dump_only = true;
+    else if (a == "--dense-start") dense_start = true;
+    else if (a == "--seed") seed = uint64_t(next());
     else if (a == "--scheme" && i + 1 < argc) scheme = std::string(argv[++i]) == "power" ? RandomizedScheme::power : RandomizedScheme::block_krylov;
     else {
       std::fprintf(stderr, "unknown argument %s\n", a.c_str());
@@ -70,6 +77,7 @@ int main(int argc, char** argv) {
   auto run_svd = [&](const float* B, size_t m, size_t n, double input_gb, int q, int p, const char* label) {
     SvdOptions opt;
     opt.max_rank = rank, opt.power_iters = q, opt.oversample = p, opt.method = SvdMethod::randomized, opt.scheme = scheme;
+    opt.sparse_sketch = !dense_start, opt.seed = seed;
     double t = now_s();
     auto r = truncated_svd(B, m, n, opt);
     const double secs = now_s() - t;
@@ -77,12 +85,15 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "%s\n", r.status().message().c_str());
       std::exit(3);
     }
-    // GEMM passes over B of width l = rank + oversample: 2q + 2 for power, 2 per block for krylov.
+    // Passes over B: 2q + 2 for power, 2 per block for krylov; all GEMMs of width l = rank +
+    // oversample except krylov's first with the sparse sketch (one add per element; svd.h).
     const int passes = scheme == RandomizedScheme::power ? 2 * q + 2 : 2 * r->iterations;
-    const double l = double(rank + p), flops = passes * 2.0 * double(m) * double(n) * l;
-    std::printf("%-10s rank %d q %d p %d %s: %.2f s, rel L2 error %.6f, %d passes, %.0f GFLOP/s in the passes over B, peak RSS %.2f GB (%.2f x input)\n",
-                label, rank, q, p, scheme == RandomizedScheme::power ? "power" : "krylov", secs, r->rel_error_estimate(), passes,
-                flops / secs / 1e9, peak_rss_gb(), peak_rss_gb() / input_gb);
+    const bool sparse = r->sparse_start;
+    const int gemms = passes - (sparse ? 1 : 0);
+    const double l = double(rank + p), flops = gemms * 2.0 * double(m) * double(n) * l;
+    std::printf("%-10s rank %d q %d p %d %s: %.2f s, rel L2 error %.6f, %d passes (%d GEMMs), %.0f GFLOP/s over the whole run, peak RSS %.2f GB (%.2f x input)\n",
+                label, rank, q, p, scheme == RandomizedScheme::power ? "power" : (sparse ? "krylov" : "krylov_dense"), secs,
+                r->rel_error_estimate(), passes, gemms, flops / secs / 1e9, peak_rss_gb(), peak_rss_gb() / input_gb);
     std::fflush(stdout);
     return r->rel_error_estimate();
   };

@@ -2,6 +2,7 @@
 #include "core/svd.h"
 
 #include "core/memory.h"
+#include "core/sparse_sketch.h"
 #include "core/thin_product.h"
 
 #include <Eigen/Dense>
@@ -169,10 +170,14 @@ Result<SvdResult> exact_svd(ConstMapF& B, const SvdOptions& opt) {
 }
 
 // The passes' products (core/thin_product.h), on the mapped data.
-void product_bt(ConstMapF& B, const MatrixXf& Y, MatrixXf& Z, double* energy = nullptr) {
-  transposed_product(B.data(), size_t(B.rows()), size_t(B.cols()), Y, Z, energy);
+template <class Out>
+void product_bt(ConstMapF& B, const ConstRefF& Y, Out&& Z, double* energy = nullptr) {
+  transposed_product(B.data(), size_t(B.rows()), size_t(B.cols()), Y, std::forward<Out>(Z), energy);
 }
-void product_b(ConstMapF& B, const MatrixXf& X, MatrixXf& Y) { thin_product(B.data(), size_t(B.rows()), size_t(B.cols()), X, Y); }
+template <class Out>
+void product_b(ConstMapF& B, const ConstRefF& X, Out&& Y) {
+  thin_product(B.data(), size_t(B.rows()), size_t(B.cols()), X, std::forward<Out>(Y));
+}
 
 }  // namespace
 
@@ -293,6 +298,7 @@ void orthonormalize_against(const Eigen::Ref<const MatrixXd>& P, Index used, Eig
 
 // Randomized block Krylov SVD (Musco and Musco 2015; the Ritz step of Halko et al. 2011,
 // section 4.3, on the right-hand side): blocks X_1 = orth(B^T Omega), X_{i+1} = orth(B^T B X_i)
+// (Omega = S G, a sparse sign sketch and a Gaussian, for tall B: first_block)
 // with every block kept and made orthogonal to the earlier ones, so P = [X_1 .. X_k] is an
 // orthonormal basis of the Krylov space K_k(B^T B, B^T Omega). Each block costs two passes
 // over B (B^T Y and Y = B X), as one power iteration does, but the basis grows by l columns per
@@ -305,6 +311,38 @@ void orthonormalize_against(const Eigen::Ref<const MatrixXd>& P, Index used, Eig
 // k_krylov_stop of itself (the remaining gap to the optimum then is a fraction of that), and
 // before the basis would exceed the small side of B.
 constexpr double k_krylov_stop = 2e-3;
+
+// The buckets of the first block's sparse sign sketch, 0 for a dense Gaussian start: s = 4 l
+// rounded up to a multiple of 128 (at least 256: the sketch is then ~ as good a start as a Gaussian, sparse_sketch.h), when B has
+// at least 4 s rows (fewer rows: the dense pass is cheap and a sketch would hardly be smaller).
+size_t sparse_buckets(ConstMapF& B, Index l, const SvdOptions& opt) {
+  const size_t s = (std::max<size_t>(4 * size_t(l), 256) + 127) / 128 * 128;  // 256, 384: accumulators in registers
+  return opt.sparse_sketch && s <= 1024 && size_t(B.rows()) >= 4 * s ? s : 0;
+}
+
+// Nonzeros per row of the sketch. With one (CountSketch) a row's weight meets one other set of
+// rows per bucket; two halve the chance that a direction concentrated on few rows cancels out,
+// at no measured cost (the pass stays bound by reading B). Over six seeds, 16384 texels of the
+// UBO2003-size matrix, rank 32, 2 blocks: 1, 2 and 4 nonzeros and the dense Gaussian start gave
+// the same mean error within the seed-to-seed spread (docs/benchmarks.md).
+constexpr size_t k_sketch_layers = 2;
+
+// Z = B^T S G (n x l): W = S^T B in one pass at memory speed (and ||B||_F^2), then W^T G, in
+// chunks of texels so W (s x chunk) stays a small reused buffer (fresh pages cost time).
+void first_block(ConstMapF& B, size_t buckets, Index l, uint64_t seed, Eigen::Map<MatrixXf>& Z, double& energy) {
+  const size_t m = size_t(B.rows()), n = size_t(B.cols()), chunk = std::min<size_t>(n, 4096);
+  const SparseSign S = make_sparse_sign(m, buckets, seed, k_sketch_layers);
+  const MatrixXf G = gaussian(Index(S.s), l, seed);
+  PageBuffer<float> w(S.s * chunk);
+  energy = 0;
+  for (size_t j0 = 0; j0 < n; j0 += chunk) {
+    const size_t nc = std::min(chunk, n - j0);
+    double e = 0;
+    sparse_sign_product(B.data() + j0 * m, nc, S, w.data(), &e);
+    energy += e;  // in chunk order: independent of the thread count
+    transposed_product(w.data(), S.s, nc, G, Z.middleRows(Index(j0), Index(nc)));
+  }
+}
 
 // out = A M (rows x cols, float) for a tall A, in blocks of rows: the double product of a
 // block at a time, so no rows x cols double temporary (its fresh pages cost more than the product).
@@ -319,16 +357,20 @@ void rows_times(const A& a, const M& mat, MatrixXfR& out) {
   }
 }
 
-// A column-major double matrix in huge-page scratch memory (core/memory.h): the Krylov basis and
-// B P are the SVD's largest buffers (65536 x 96 doubles at rank 32). Not zeroed.
+// A column-major matrix in huge-page scratch memory (core/memory.h): the Krylov basis and B P
+// are the SVD's largest buffers (65536 x 96 doubles at rank 32), the n x l float blocks the
+// next (fresh 4 KiB pages for those cost 25-65 ms a run). Not zeroed.
+template <class Scalar>
 class PageMatrix {
+  using Mat = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>;
+
  public:
   PageMatrix(Index rows, Index cols) : m_buf(size_t(rows) * size_t(cols)), map(m_buf.data(), rows, cols) {}
-  Eigen::Map<MatrixXd>& operator*() { return map; }
+  Eigen::Map<Mat>& operator*() { return map; }
 
  private:
-  PageBuffer<double> m_buf;
-  Eigen::Map<MatrixXd> map;
+  PageBuffer<Scalar> m_buf;
+  Eigen::Map<Mat> map;
 };
 
 Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
@@ -344,11 +386,16 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
   // Buffers are allocated once, the two largest with huge pages: fresh memory costs its page
   // faults (1.3-3 ms per MB on the VMs measured, docs/benchmarks.md), a sizeable part of a pass.
   const Index width = Index(max_blocks) * l;
-  PageMatrix p_buf(n, width), ys_buf(m, width);
+  PageMatrix<double> p_buf(n, width), ys_buf(m, width);
+  PageMatrix<float> z_buf(n, l), xf_buf(n, l);
   auto& P = *p_buf;   // the orthonormal Krylov basis, l columns per block
   auto& Ys = *ys_buf;  // B P, block by block (double: the stopping test and the Ritz step need it)
+  auto& Z = *z_buf;    // B^T Y, then its orthonormalised float copy Xf for B X
+  auto& Xf = *xf_buf;
   MatrixXd G(width, width);  // Ys^T Ys, grown block by block
-  MatrixXf Y = gaussian(m, l, opt.seed), Xf, Z;
+  const size_t sketch_buckets = sparse_buckets(B, l, opt);
+  r.sparse_start = sketch_buckets > 0;
+  MatrixXf Y = sketch_buckets > 0 ? MatrixXf() : gaussian(m, l, opt.seed);
   int blocks = 0;
   Index g_cols = 0;  // columns of G filled
   double last_err = -1;
@@ -361,7 +408,8 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
   while (blocks < max_blocks) {
     const Index used = Index(blocks) * l, w = used + l;
     // The first pass also sums ||B||_F^2 (no separate pass over B).
-    product_bt(B, Y, Z, blocks == 0 ? &r.total_energy : nullptr);  // n x l
+    if (blocks == 0 && sketch_buckets > 0) first_block(B, sketch_buckets, l, opt.seed, Z, r.total_energy);
+    else product_bt(B, Y, Z, blocks == 0 ? &r.total_energy : nullptr);  // n x l
     step();
     auto X = P.middleCols(used, l);
     X = Z.cast<double>();
@@ -382,7 +430,7 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
     if (blocks >= 2 && last_err - err <= k_krylov_stop * err) break;
     last_err = err;
   }
-  Y.resize(0, 0), Z.resize(0, 0), Xf.resize(0, 0);
+  Y.resize(0, 0);
   const Index w = Index(blocks) * l;
   r.iterations = blocks;
   // Ritz step, B ~ (B P) P^T: the SVD of B P = Ys. Fast path: from the eigenpairs of the Gram

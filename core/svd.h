@@ -13,7 +13,8 @@
 //    l = C + oversample through Eigen and OpenBLAS, multi-threaded; B is never copied):
 //    block_krylov (default): randomized block Krylov (Musco and Musco 2015), up to q + 1 blocks
 //    of l columns kept side by side, two passes per block, no final pass (svd.cpp, krylov_svd),
-//    stopping early once a block no longer improves the rank-C error; at most 2q + 2 passes.
+//    stopping early once a block no longer improves the rank-C error; at most 2q + 2 passes,
+//    the first of them a sparse sign sketch (one add per element; SvdOptions::sparse_sketch).
 //    power: Halko, Martinsson, Tropp 2011, Alg. 4.4 with re-orthonormalised power iterations:
 //    sketch Y = B Omega, q power iterations, Q = orth(Y), then the small SVD of Q^T B; 2q + 2
 //    passes. The out-of-core path (codecs/fmf/ooc_svd.h) streams this one.
@@ -48,6 +49,10 @@ struct SvdOptions {
   int power_iters = 4;
   uint64_t seed = 1;
   RandomizedScheme scheme = RandomizedScheme::block_krylov;
+  // block_krylov: the first block from a sparse sign sketch (core/sparse_sketch.h) when B has at
+  // least 4 s rows (s = max(4 l, 256) buckets, l = rank + oversample <= 256): a pass at memory
+  // speed instead of a GEMM. false: a dense Gaussian test matrix (the reference in tests).
+  bool sparse_sketch = true;
   Progress* progress = nullptr;
 };
 
@@ -64,6 +69,7 @@ struct SvdResult {
   int data_rank_limit = 0;  // min(m, n, numerical rank seen)
   bool target_reached = true;
   int iterations = 0;       // randomized block_krylov: blocks computed (2 passes each); else 0
+  bool sparse_start = false;  // block_krylov: the first block came from the sparse sign sketch
   // Estimated relative Frobenius error sqrt(max(0, total - kept) / total).
   double rel_error_estimate() const;
 };

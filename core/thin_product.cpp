@@ -166,7 +166,17 @@ void thin_nn(const float* B, size_t m, size_t n, const float* Xr, size_t lp, flo
 
 }  // namespace
 
-void transposed_product(const float* B, size_t m, size_t n, const Eigen::MatrixXf& Y, Eigen::MatrixXf& Z, double* energy) {
+void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::MatrixXf& Z, double* energy) {
+  Z.resize(Index(n), Y.cols());
+  transposed_product(B, m, n, Y, Eigen::Ref<Eigen::MatrixXf>(Z), energy);
+}
+
+void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::MatrixXf& Y) {
+  Y.resize(Index(m), X.cols());
+  thin_product(B, m, n, X, Eigen::Ref<Eigen::MatrixXf>(Y));
+}
+
+void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy) {
   const Index l = Y.cols();
 #ifdef BTFC_THIN_AVX512
   const Index nv = (l + 15) / 16;
@@ -188,7 +198,7 @@ void transposed_product(const float* B, size_t m, size_t n, const Eigen::MatrixX
   if (energy) *energy = squared_norm(B, m * n);
 }
 
-void thin_product(const float* B, size_t m, size_t n, const Eigen::MatrixXf& X, Eigen::MatrixXf& Y) {
+void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::Ref<Eigen::MatrixXf> Y) {
   const Index l = X.cols();
   ConstMapF map(B, Index(m), Index(n));
 #ifdef BTFC_THIN_AVX512
@@ -204,7 +214,6 @@ void thin_product(const float* B, size_t m, size_t n, const Eigen::MatrixXf& X, 
     if (cc == 12) thin_nn<2, 12>(B, m, n, Xr.data(), size_t(lp), Yp.data());
     else thin_nn<2, 8>(B, m, n, Xr.data(), size_t(lp), Yp.data());
     const Index mfull = Index(m / R * R), tail = Index(m) - mfull;
-    Y.resize(Index(m), l);
     Y = Yp.leftCols(l);
     if (tail > 0) Y.bottomRows(tail).noalias() = map.bottomRows(tail) * X;
     return;

@@ -16,12 +16,15 @@
 namespace btfc {
 
 // Z = B^T Y: Z n x l, Y m x l. With `energy`, also *energy = ||B||_F^2 (= squared_norm(B, m n)
-// to round-off; the kernel sums it during the pass, from cache).
-void transposed_product(const float* B, size_t m, size_t n, const Eigen::MatrixXf& Y, Eigen::MatrixXf& Z,
-                        double* energy = nullptr);
+// to round-off; the kernel sums it during the pass, from cache). A MatrixXf Z is resized; a Ref
+// (a map of the caller's memory, e.g. huge pages) must already be n x l.
+using ConstRefF = Eigen::Ref<const Eigen::MatrixXf>;
+void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy = nullptr);
+void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::MatrixXf& Z, double* energy = nullptr);
 
-// Y = B X: Y m x l, X n x l. Y and X must be different matrices (Y is resized first).
-void thin_product(const float* B, size_t m, size_t n, const Eigen::MatrixXf& X, Eigen::MatrixXf& Y);
+// Y = B X: Y m x l, X n x l, different memory. A MatrixXf Y is resized; a Ref must be m x l.
+void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::Ref<Eigen::MatrixXf> Y);
+void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::MatrixXf& Y);
 
 // ||B||_F^2 over `count` floats, summed in double (vectorized, parallel, fixed block order).
 double squared_norm(const float* B, size_t count);

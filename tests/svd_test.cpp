@@ -6,8 +6,10 @@
 #include <Eigen/Dense>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <random>
 
+#include "core/sparse_sketch.h"
 #include "core/svd.h"
 #include "core/thin_product.h"
 
@@ -52,7 +54,8 @@ double actual_rel_error(const std::vector<float>& b, size_t m, size_t n, const S
 }
 
 TEST(Svd, BlockKrylovIsWithinOnePercentOfEckartYoungInFewerPasses) {
-  const size_t m = 600, n = 1500;
+  // 600 rows: a dense Gaussian first block; 1500 rows (>= 4 x 256): the sparse sign sketch.
+  for (auto [m, n] : {std::pair<size_t, size_t>{600, 1500}, {1500, 600}}) {
   Eigen::VectorXd sigma;
   const std::vector<float> b = slow_decay_matrix(m, n, 7, sigma);
   for (int C : {8, 32}) {
@@ -67,8 +70,9 @@ TEST(Svd, BlockKrylovIsWithinOnePercentOfEckartYoungInFewerPasses) {
     ASSERT_TRUE(power.ok());
     EXPECT_EQ(krylov->method, "randomized");
     const double ek = actual_rel_error(b, m, n, *krylov), ep = actual_rel_error(b, m, n, *power);
-    std::printf("rank %d: optimum %.6f, block Krylov %.6f (%d blocks), power iterations in as many passes %.6f\n", C, optimum, ek,
-                krylov->iterations, ep);
+    std::printf("%zu x %zu, rank %d: optimum %.6f, block Krylov %.6f (%d blocks, %s start), power iterations in as many passes %.6f\n",
+                m, n, C, optimum, ek, krylov->iterations, krylov->sparse_start ? "sparse" : "Gaussian", ep);
+    EXPECT_EQ(krylov->sparse_start, m >= 1024);
     EXPECT_GE(ek / optimum, 1 - 1e-4) << "cannot beat Eckart-Young";
     EXPECT_LE(ek / optimum, 1.01) << "rank " << C;
     EXPECT_LE(krylov->iterations, 5);
@@ -81,6 +85,58 @@ TEST(Svd, BlockKrylovIsWithinOnePercentOfEckartYoungInFewerPasses) {
     EXPECT_LT((UtU - Eigen::MatrixXd::Identity(C, C)).cwiseAbs().maxCoeff(), 1e-5);
     for (int i = 0; i < C; ++i) EXPECT_NEAR(krylov->S(i), sigma(i), 0.02 * sigma(i)) << i;
   }
+  }
+}
+
+// The sparse sign sketch W = S^T B (core/sparse_sketch.h) against its one-value-at-a-time
+// reference (bit for bit: the same sums in the same order) and against S^T B formed from the map
+// in double; every row in exactly one bucket; the energy against squared_norm.
+TEST(Svd, SparseSignSketchEqualsTheReference) {
+  std::mt19937_64 rng(12);
+  std::uniform_real_distribution<float> u(-1.f, 1.f);
+  // Rows: one, less than a group, a group's tail, whole and partial blocks (16 G rows), large.
+  for (size_t m : {1, 15, 16, 17, 255, 256, 257, 1000, 4099}) {
+    for (size_t s : {16, 256, 320, 384, 1024}) {
+      const size_t n = 67;
+      std::vector<float> b(m * n);
+      for (float& x : b) x = u(rng);
+      const SparseSign S = make_sparse_sign(m, s, 3, 2);
+      ASSERT_EQ(S.s, s);
+      ASSERT_EQ(S.layers, 2u);
+      std::vector<float> w(s * n, -1.f), w_ref(s * n, -2.f);
+      double e = -1, e_ref = -1;
+      sparse_sign_product(b.data(), n, S, w.data(), &e);
+      sparse_sign_product_reference(b.data(), n, S, w_ref.data(), &e_ref);
+      ASSERT_EQ(0, std::memcmp(w.data(), w_ref.data(), w.size() * sizeof(float))) << m << " " << s;
+      const double total = squared_norm(b.data(), b.size());
+      EXPECT_NEAR(e, total, 1e-12 * total) << m << " " << s;
+      EXPECT_NEAR(e_ref, total, 1e-12 * total);
+      // The map: row i -> (bucket, sign) per layer; per layer each row once, each bucket group one
+      // row group per block (a row may meet the same bucket in two layers: the entries add).
+      const size_t groups = s / 16, q_all = (m + 15) / 16;
+      Eigen::MatrixXd St = Eigen::MatrixXd::Zero(Eigen::Index(s), Eigen::Index(m));
+      for (size_t t = 0; t < S.layers; ++t) {
+        std::vector<int> seen(q_all, 0);
+        for (size_t i = 0; i < q_all; ++i) {
+          const size_t k = i % groups, q = i - k + S.pick[t * q_all + i];
+          ASSERT_LT(q, q_all);
+          ++seen[q];
+          const uint16_t neg = S.negative[t * q_all + q];
+          for (size_t r = 0; r < 16 && 16 * q + r < m; ++r) St(Eigen::Index(16 * k + r), Eigen::Index(16 * q + r)) += (neg >> r) & 1 ? -1 : 1;
+        }
+        for (size_t q = 0; q < q_all; ++q) ASSERT_EQ(seen[q], 1) << "layer " << t << " row group " << q;
+      }
+      Eigen::Map<const Eigen::MatrixXf> B(b.data(), Eigen::Index(m), Eigen::Index(n));
+      const Eigen::MatrixXd ref = St * B.cast<double>();
+      Eigen::Map<const Eigen::MatrixXf> W(w.data(), Eigen::Index(s), Eigen::Index(n));
+      EXPECT_LT((W.cast<double>() - ref).cwiseAbs().maxCoeff(), 1e-6 * double(m)) << m << " " << s;
+    }
+  }
+  // The same seed gives the same map; another seed another one.
+  const SparseSign a = make_sparse_sign(5000, 256, 1, 4), b2 = make_sparse_sign(5000, 256, 1, 4), c = make_sparse_sign(5000, 256, 2, 4);
+  EXPECT_EQ(a.pick, b2.pick);
+  EXPECT_EQ(a.negative, b2.negative);
+  EXPECT_NE(a.negative, c.negative);
 }
 
 TEST(Svd, BlockKrylovStopsEarlyOnAFastDecayAndHandlesExhaustedRanges) {
