@@ -132,7 +132,7 @@ TEST(Quant, HostilePayloadsAreErrorsNeverCrashes) {
     Tensor t = good;
     t.bytes[i] ^= 0x5a;
     auto r = quant::decode(t, "h");
-    if (i < 32) EXPECT_FALSE(r.ok()) << "header byte " << i;
+    if (i < 32) { EXPECT_FALSE(r.ok()) << "header byte " << i; }
   }
   // Huge declared sizes: a shape of 2^40 rows, and a zstd frame claiming more than it holds.
   Tensor big = good;
@@ -197,14 +197,14 @@ TEST(Quant, ContainerStoresZqTensorsAndRejectsDamagedFiles) {
   for (size_t n = 0; n < file.size(); n += 7) {
     spit(damaged, std::vector<char>(file.begin(), file.begin() + ptrdiff_t(n)));
     auto rd = ContainerReader::open(damaged);
-    if (rd.ok()) EXPECT_FALSE(rd->read_floats("q", {rows, K}).ok()) << n;
+    if (rd.ok()) { EXPECT_FALSE(rd->read_floats("q", {rows, K}).ok()) << n; }
   }
   for (size_t i = 0; i < file.size(); ++i) {
     std::vector<char> f = file;
     f[i] ^= 0x21;
     spit(damaged, f);
     auto rd = ContainerReader::open(damaged);
-    if (rd.ok()) EXPECT_FALSE(rd->read_floats("q", {rows, K}).ok()) << i;
+    if (rd.ok()) { EXPECT_FALSE(rd->read_floats("q", {rows, K}).ok()) << i; }
   }
 }
 

@@ -206,7 +206,7 @@ class FmfCodec final : public Codec {
       for (size_t k = 0; k < 3; ++k) {
         const Block& b = fb[k];
         const Index c = std::min<Index>(b.U.cols(), k == 0 ? ry : rc);
-        bs.push_back({b.name, b.U.leftCols(c), b.SxV.leftCols(c), b.S.head(c), b.scale.head(c)});
+        bs.push_back({b.name, b.U.leftCols(c), b.SxV.leftCols(c), b.S.head(c), b.scale.head(c), {}});  // a truncation: not the coded tensors
       }
       return std::make_unique<FmfModel>(full->desc(), full->spec(), full->config(), std::move(bs));
     };
