@@ -278,6 +278,14 @@ bool cholesky_qr_round(Eigen::Ref<MatrixXd> X) {
 // Cholesky QR (CholeskyQR2 over the two rounds: 10-20x faster than Householder for 65536 x 48,
 // whose unblocked reflectors were a third of a Krylov run's time), Householder where a round's
 // Gram matrix is too ill-conditioned (rank-deficient or exhausted blocks, zero data).
+//
+// A column that lies in span(P) to double precision (an exhausted range: B^T Y of a constant
+// matrix is exactly constant in float, like a column already in P) leaves a residual of pure
+// rounding after the first projection, which can itself lie along P; normalised, it would enter
+// the basis as a second copy of a direction already there (the Ritz values then count that
+// direction's energy once per copy). Such columns (residual below 1e-9 of the column) are
+// replaced by pseudo-random ones before the QR: a random direction has a component outside
+// span(P) that the rounds keep; it carries no energy of B and so changes no kept component.
 void orthonormalize_against(const Eigen::Ref<const MatrixXd>& P, Index used, Eigen::Ref<MatrixXd> X) {
   auto project = [&] {
     if (used == 0) return;
@@ -285,12 +293,20 @@ void orthonormalize_against(const Eigen::Ref<const MatrixXd>& P, Index used, Eig
     MatrixXd C = Pu.transpose() * X;
     X.noalias() -= Pu * C;
   };
+  if (used > 0) {
+    const Eigen::VectorXd before = X.colwise().norm();
+    project();
+    for (Index c = 0; c < X.cols(); ++c) {
+      if (X.col(c).norm() > 1e-9 * before(c) && before(c) > 0) continue;
+      std::mt19937_64 rng(0x9E3779B97F4A7C15ull ^ uint64_t(used + c));
+      for (Index i = 0; i < X.rows(); ++i) X(i, c) = double(rng() >> 11) * (1.0 / 9007199254740992.0) - 0.5;
+    }
+  }
   auto qr = [&] {
     if (cholesky_qr_round(X)) return;
     Eigen::HouseholderQR<MatrixXd> h(X);
     X = h.householderQ() * MatrixXd::Identity(X.rows(), X.cols());
   };
-  project();
   qr();
   project();
   qr();
