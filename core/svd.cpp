@@ -329,8 +329,9 @@ void orthonormalize_against(const Eigen::Ref<const MatrixXd>& P, Index used, Eig
 constexpr double k_krylov_stop = 2e-3;
 
 // The buckets of the first block's sparse sign sketch, 0 for a dense Gaussian start: s = 4 l
-// rounded up to a multiple of 128 (at least 256: the sketch is then ~ as good a start as a Gaussian, sparse_sketch.h), when B has
-// at least 4 s rows (fewer rows: the dense pass is cheap and a sketch would hardly be smaller).
+// rounded up to a multiple of 128, at least 256 (then as good a start as a Gaussian one,
+// sparse_sketch.h), when B has at least 4 s rows (fewer: the dense pass is cheap there and the
+// sketch hardly smaller than B) and s <= 1024 (l <= 256).
 size_t sparse_buckets(ConstMapF& B, Index l, const SvdOptions& opt) {
   const size_t s = (std::max<size_t>(4 * size_t(l), 256) + 127) / 128 * 128;  // 256, 384: accumulators in registers
   return opt.sparse_sketch && s <= 1024 && size_t(B.rows()) >= 4 * s ? s : 0;

@@ -50,8 +50,8 @@ struct SvdOptions {
   uint64_t seed = 1;
   RandomizedScheme scheme = RandomizedScheme::block_krylov;
   // block_krylov: the first block from a sparse sign sketch (core/sparse_sketch.h) when B has at
-  // least 4 s rows (s = max(4 l, 256) buckets, l = rank + oversample <= 256): a pass at memory
-  // speed instead of a GEMM. false: a dense Gaussian test matrix (the reference in tests).
+  // least 4 s rows (s = 4 l rounded up to 128, at least 256; l = rank + oversample <= 256): a
+  // pass at memory speed instead of a GEMM. false: a dense Gaussian test matrix.
   bool sparse_sketch = true;
   Progress* progress = nullptr;
 };
