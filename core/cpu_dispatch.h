@@ -32,4 +32,9 @@ namespace btfc {
 // For `btfc info --system` / bench headers: a benchmark row says which code ran.
 const char* cpu_dispatch_level();
 
+// Whether this CPU runs AVX-512F (tested once): the check before calling a hand-written kernel
+// compiled with __attribute__((target("avx512f"))) (named *_avx512, core/thin_product.cpp,
+// core/sparse_sketch.cpp). False where GCC's x86-64 CPU tests are not available.
+bool cpu_has_avx512f();
+
 }  // namespace btfc

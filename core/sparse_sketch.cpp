@@ -1,6 +1,8 @@
 // The sparse sign sketch S^T B; see sparse_sketch.h for the contract and the sources.
 #include "core/sparse_sketch.h"
 
+#include "core/cpu_dispatch.h"
+
 #include <algorithm>
 #include <random>
 
@@ -17,14 +19,6 @@ constexpr size_t k_texels = 64;     // texels per parallel task: a contiguous 64
 constexpr size_t k_ahead = 2048;    // software prefetch distance in floats (8 KB: measured 1-8 KB alike)
 
 #ifdef BTFC_SKETCH_AVX512
-bool have_avx512() {
-  static const bool yes = [] {
-    __builtin_cpu_init();
-    return __builtin_cpu_supports("avx512f");
-  }();
-  return yes;
-}
-
 // One vector of 16 rows (row group q) into its bucket group's accumulator, its squares into the
 // energy (in double, so it matches squared_norm to round-off).
 __attribute__((target("avx512f"))) inline void sketch_add_avx512(const uint16_t* negative, const float* col, size_t q, __m512& acc,
@@ -133,7 +127,7 @@ void sketch(const float* B, size_t n, const SparseSign& S, float* W, double* ene
   const int64_t tasks = int64_t((n + k_texels - 1) / k_texels);
   std::vector<double> part(size_t(tasks), 0.0);
 #ifdef BTFC_SKETCH_AVX512
-  const bool avx512 = simd && have_avx512();
+  const bool avx512 = simd && cpu_has_avx512f();
 #else
   const bool avx512 = false;
   (void)simd;

@@ -22,14 +22,6 @@ using ConstMapF = Eigen::Map<const Eigen::MatrixXf>;
 namespace {
 
 #ifdef BTFC_THIN_AVX512
-bool have_avx512() {
-  static const bool yes = [] {
-    __builtin_cpu_init();
-    return __builtin_cpu_supports("avx512f");
-  }();
-  return yes;
-}
-
 // ---- Z = B^T Y -------------------------------------------------------------------------------
 // 8-9 texel columns at a time, their values broadcast against a row of Y (row-major, l values =
 // NV zmm registers) into TJ x NV accumulators, with the rows in chunks whose slice of Y stays in
@@ -180,7 +172,7 @@ void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, 
   const Index l = Y.cols();
 #ifdef BTFC_THIN_AVX512
   const Index nv = (l + 15) / 16;
-  if (have_avx512() && nv >= 1 && nv <= 8 && m >= 1 && n >= 1) {
+  if (cpu_has_avx512f() && nv >= 1 && nv <= 8 && m >= 1 && n >= 1) {
     const Index L = 16 * nv;
     PageBuffer<float> yr_buf(m * size_t(L)), zr_buf(n * size_t(L));
     Eigen::Map<MatrixXfR> Yr(yr_buf.data(), Index(m), L), Zr(zr_buf.data(), Index(n), L);
@@ -203,7 +195,7 @@ void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen:
   ConstMapF map(B, Index(m), Index(n));
 #ifdef BTFC_THIN_AVX512
   constexpr size_t R = 32;  // rows per tile (TK = 2)
-  if (have_avx512() && l >= 1 && l <= 128 && m >= R && n >= 1) {
+  if (cpu_has_avx512f() && l >= 1 && l <= 128 && m >= R && n >= 1) {
     // 12 or 8 columns per tile, whichever pads l less (12: fewer re-reads of B's tile).
     const Index cc = (l + 11) / 12 * 12 <= (l + 7) / 8 * 8 ? 12 : 8, lp = (l + cc - 1) / cc * cc;
     PageBuffer<float> xr_buf(n * size_t(lp)), yp_buf(m * size_t(lp));
