@@ -16,6 +16,9 @@
 //             [--dump-only]  (with --dump: stop after writing the file)
 //             [--dense-start]  (krylov: a Gaussian first block instead of the sparse sign sketch)
 //             [--seed 1]  (the test matrix's seed)
+//             [--streamed K [--chunk 256]]  (with --load: the out-of-core SVD, codecs/fmf/ooc_svd.h,
+//             over chunks of 256 texels mapped from memory as a raw .btfc's are from the page
+//             cache, holding K Krylov blocks, 0 = all; the MPI path runs the same passes)
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -27,6 +30,7 @@
 
 #include "bench/bench_timing.h"
 #include "codecs/codec.h"
+#include "codecs/fmf/ooc_svd.h"
 #include "core/svd.h"
 #include "core/cl_runtime.h"
 #include "core/blas_env.h"
@@ -49,6 +53,7 @@ int main(int argc, char** argv) {
   RandomizedScheme scheme = RandomizedScheme::block_krylov;
   bool dense_start = false;
   uint64_t seed = 1;
+  int streamed = -1, chunk = 256;
   std::string dump, codec_spec, load;
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
@@ -68,6 +73,8 @@ int main(int argc, char** argv) {
     else if (a == "--dump-only") dump_only = true;
     else if (a == "--dense-start") dense_start = true;
     else if (a == "--seed") seed = uint64_t(next());
+    else if (a == "--streamed") streamed = next();
+    else if (a == "--chunk") chunk = std::max(1, next());
     else if (a == "--scheme" && i + 1 < argc) scheme = std::string(argv[++i]) == "power" ? RandomizedScheme::power : RandomizedScheme::block_krylov;
     else {
       std::fprintf(stderr, "unknown argument %s\n", a.c_str());
@@ -97,6 +104,41 @@ int main(int argc, char** argv) {
     std::fflush(stdout);
     return r->rel_error_estimate();
   };
+  // The streamed SVD over mapped in-memory chunks of `chunk` texels.
+  auto run_streamed = [&](const float* B, size_t m, size_t n, double input_gb) {
+    struct Mapped final : ChunkSource {
+      const float* B;
+      size_t m, n, per;
+      size_t rows() const override { return m; }
+      size_t num_chunks() const override { return (n + per - 1) / per; }
+      size_t chunk_first(size_t c) const override { return c * per; }
+      size_t chunk_count(size_t c) const override { return std::min(per, n - c * per); }
+      size_t raw_bytes(size_t c) const override { return chunk_count(c) * m * 4; }
+      Status read(size_t c, void* raw) const override { return unsupported("mapped only"); }
+      Status decode(size_t c, const void* raw, float* dst) const override { return unsupported("mapped only"); }
+      bool mappable() const override { return true; }
+      Result<const float*> map(size_t c) const override { return B + chunk_first(c) * m; }
+    } src;
+    src.B = B, src.m = m, src.n = n, src.per = size_t(chunk);
+    SvdOptions opt;
+    opt.max_rank = rank, opt.power_iters = power, opt.oversample = over, opt.seed = seed;
+    Collective one;
+    StreamStats st;
+    const double t = now_s();
+    auto r = fmf::streaming_svd(src, owned_chunks(src, 0, 1), opt, one, &st, streamed);
+    const double secs = now_s() - t;
+    if (!r.ok()) {
+      std::fprintf(stderr, "%s\n", r.status().message().c_str());
+      std::exit(3);
+    }
+    std::printf("streamed   rank %d q %d p %d kept %d: %.2f s, rel L2 error %.6f, %d passes (%d blocks), peak RSS %.2f GB (%.2f x input)\n",
+                rank, power, over, streamed, secs, r->rel_error_estimate(), st.passes, r->iterations, peak_rss_gb(),
+                peak_rss_gb() / input_gb);
+    std::printf("           pass seconds:");
+    for (double p : st.pass_seconds) std::printf(" %.2f", p);
+    std::printf("\n");
+    std::fflush(stdout);
+  };
   if (!load.empty()) {
     // A --dump file: m x n column-major float32, read into one buffer (the input of the peak RSS
     // ratio), of the kind a Btf holds (FloatBuffer: 2 MiB-aligned, huge pages requested), so the
@@ -112,6 +154,10 @@ int main(int argc, char** argv) {
     std::fclose(f);
     const double input_gb = double(B.size()) * 4 / 1e9;
     std::printf("input: %s, %zu x %zu float32, %.2f GB\n", load.c_str(), m, n, input_gb);
+    if (streamed >= 0) {
+      run_streamed(B.data(), m, n, input_gb);
+      return 0;
+    }
     run_svd(B.data(), m, n, input_gb, power, over, "fmf");
     return 0;
   }

@@ -183,8 +183,6 @@ void product_b(ConstMapF& B, const ConstRefF& X, Out&& Y) {
 
 namespace {
 
-void orthonormalize_against(const Eigen::Ref<const MatrixXd>& P, Index used, Eigen::Ref<MatrixXd> X);
-
 // Orthonormal basis of the columns of Y (in double for stability).
 MatrixXf orthonormalize(const MatrixXf& Y) {
   MatrixXd Yd = Y.cast<double>();
@@ -271,6 +269,50 @@ bool cholesky_qr_round(Eigen::Ref<MatrixXd> X) {
   return true;
 }
 
+}  // namespace
+
+// Nonzeros per row of the sketch. With one (CountSketch) a row's weight meets one other set of
+// rows per bucket; two halve the chance that a direction concentrated on few rows cancels out,
+// at no measured cost (the pass stays bound by reading B). Over six seeds, 16384 texels of the
+// UBO2003-size matrix, rank 32, 2 blocks: 1, 2 and 4 nonzeros and the dense Gaussian start gave
+// the same mean error within the seed-to-seed spread (docs/benchmarks.md).
+constexpr size_t k_sketch_layers = 2;
+
+// The sketch's buckets: s = 4 l rounded up to a multiple of 128, at least 256 (then as good a
+// start as a Gaussian one, sparse_sketch.h), when B has at least 4 s rows (fewer: the dense pass
+// is cheap there and the sketch hardly smaller than B) and s <= 1024 (l <= 256).
+RowSketch make_row_sketch(size_t m, Index l, const SvdOptions& opt) {
+  RowSketch r;
+  const size_t s = (std::max<size_t>(4 * size_t(l), 256) + 127) / 128 * 128;  // 256, 384: accumulators in registers
+  if (opt.sparse_sketch && s <= 1024 && m >= 4 * s) {
+    r.S = make_sparse_sign(m, s, opt.seed, k_sketch_layers);
+    r.G = gaussian(Index(r.S.s), l, opt.seed);
+  } else {
+    r.G = gaussian(Index(m), l, opt.seed);
+  }
+  return r;
+}
+
+// Sparse: W = S^T B in one pass at memory speed (and ||B||_F^2), then W^T G, in chunks of texels
+// so W (s x chunk) stays a small reused buffer (fresh pages cost time).
+void row_sketch_product(const float* B, size_t n, const RowSketch& sketch, Eigen::Ref<MatrixXf> Z, double* energy) {
+  if (!sketch.sparse()) {
+    double e = 0;
+    transposed_product(B, size_t(sketch.G.rows()), n, sketch.G, Z, energy ? &e : nullptr);
+    if (energy) *energy += e;
+    return;
+  }
+  const size_t m = sketch.S.m, s = sketch.S.s, chunk = std::min<size_t>(n, 4096);
+  PageBuffer<float> w(s * chunk);
+  for (size_t j0 = 0; j0 < n; j0 += chunk) {
+    const size_t nc = std::min(chunk, n - j0);
+    double e = 0;
+    sparse_sign_product(B + j0 * m, nc, sketch.S, w.data(), energy ? &e : nullptr);
+    if (energy) *energy += e;  // in chunk order: independent of the thread count
+    transposed_product(w.data(), s, nc, sketch.G, Z.middleRows(Index(j0), Index(nc)));
+  }
+}
+
 // X := an orthonormal basis of X's columns orthogonal to P's: block classical Gram-Schmidt and
 // QR, twice ("twice is enough"; the second round after normalising, so a block that is noise
 // after the projection, as when the Krylov space has exhausted B's range, is still made
@@ -312,9 +354,11 @@ void orthonormalize_against(const Eigen::Ref<const MatrixXd>& P, Index used, Eig
   qr();
 }
 
+namespace {
+
 // Randomized block Krylov SVD (Musco and Musco 2015; the Ritz step of Halko et al. 2011,
 // section 4.3, on the right-hand side): blocks X_1 = orth(B^T Omega), X_{i+1} = orth(B^T B X_i)
-// (Omega = S G, a sparse sign sketch and a Gaussian, for tall B: first_block)
+// (Omega = S G, a sparse sign sketch and a Gaussian, for tall B: make_row_sketch)
 // with every block kept and made orthogonal to the earlier ones, so P = [X_1 .. X_k] is an
 // orthonormal basis of the Krylov space K_k(B^T B, B^T Omega). Each block costs two passes
 // over B (B^T Y and Y = B X), as one power iteration does, but the basis grows by l columns per
@@ -325,41 +369,7 @@ void orthonormalize_against(const Eigen::Ref<const MatrixXd>& P, Index used, Eig
 // B P P^T truncated to rank C is ||B||^2 - sum of the C largest S^2, the same estimate as before.
 // Stops early, after at least two blocks, when a block improved that rank-C error by less than
 // k_krylov_stop of itself (the remaining gap to the optimum then is a fraction of that), and
-// before the basis would exceed the small side of B.
-constexpr double k_krylov_stop = 2e-3;
-
-// The buckets of the first block's sparse sign sketch, 0 for a dense Gaussian start: s = 4 l
-// rounded up to a multiple of 128, at least 256 (then as good a start as a Gaussian one,
-// sparse_sketch.h), when B has at least 4 s rows (fewer: the dense pass is cheap there and the
-// sketch hardly smaller than B) and s <= 1024 (l <= 256).
-size_t sparse_buckets(ConstMapF& B, Index l, const SvdOptions& opt) {
-  const size_t s = (std::max<size_t>(4 * size_t(l), 256) + 127) / 128 * 128;  // 256, 384: accumulators in registers
-  return opt.sparse_sketch && s <= 1024 && size_t(B.rows()) >= 4 * s ? s : 0;
-}
-
-// Nonzeros per row of the sketch. With one (CountSketch) a row's weight meets one other set of
-// rows per bucket; two halve the chance that a direction concentrated on few rows cancels out,
-// at no measured cost (the pass stays bound by reading B). Over six seeds, 16384 texels of the
-// UBO2003-size matrix, rank 32, 2 blocks: 1, 2 and 4 nonzeros and the dense Gaussian start gave
-// the same mean error within the seed-to-seed spread (docs/benchmarks.md).
-constexpr size_t k_sketch_layers = 2;
-
-// Z = B^T S G (n x l): W = S^T B in one pass at memory speed (and ||B||_F^2), then W^T G, in
-// chunks of texels so W (s x chunk) stays a small reused buffer (fresh pages cost time).
-void first_block(ConstMapF& B, size_t buckets, Index l, uint64_t seed, Eigen::Map<MatrixXf>& Z, double& energy) {
-  const size_t m = size_t(B.rows()), n = size_t(B.cols()), chunk = std::min<size_t>(n, 4096);
-  const SparseSign S = make_sparse_sign(m, buckets, seed, k_sketch_layers);
-  const MatrixXf G = gaussian(Index(S.s), l, seed);
-  PageBuffer<float> w(S.s * chunk);
-  energy = 0;
-  for (size_t j0 = 0; j0 < n; j0 += chunk) {
-    const size_t nc = std::min(chunk, n - j0);
-    double e = 0;
-    sparse_sign_product(B.data() + j0 * m, nc, S, w.data(), &e);
-    energy += e;  // in chunk order: independent of the thread count
-    transposed_product(w.data(), S.s, nc, G, Z.middleRows(Index(j0), Index(nc)));
-  }
-}
+// before the basis would exceed the small side of B (k_krylov_stop, svd.h).
 
 // out = A M (rows x cols, float) for a tall A, in blocks of rows: the double product of a
 // block at a time, so no rows x cols double temporary (its fresh pages cost more than the product).
@@ -410,9 +420,9 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
   auto& Z = *z_buf;    // B^T Y, then its orthonormalised float copy Xf for B X
   auto& Xf = *xf_buf;
   MatrixXd G(width, width);  // Ys^T Ys, grown block by block
-  const size_t sketch_buckets = sparse_buckets(B, l, opt);
-  r.sparse_start = sketch_buckets > 0;
-  MatrixXf Y = sketch_buckets > 0 ? MatrixXf() : gaussian(m, l, opt.seed);
+  RowSketch sketch = make_row_sketch(size_t(m), l, opt);
+  r.sparse_start = sketch.sparse();
+  MatrixXf Y = sketch.sparse() ? MatrixXf() : std::move(sketch.G);
   int blocks = 0;
   Index g_cols = 0;  // columns of G filled
   double last_err = -1;
@@ -425,7 +435,10 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
   while (blocks < max_blocks) {
     const Index used = Index(blocks) * l, w = used + l;
     // The first pass also sums ||B||_F^2 (no separate pass over B).
-    if (blocks == 0 && sketch_buckets > 0) first_block(B, sketch_buckets, l, opt.seed, Z, r.total_energy);
+    if (blocks == 0 && sketch.sparse()) {
+      r.total_energy = 0;
+      row_sketch_product(B.data(), size_t(n), sketch, Z, &r.total_energy);
+    }
     else product_bt(B, Y, Z, blocks == 0 ? &r.total_energy : nullptr);  // n x l
     step();
     auto X = P.middleCols(used, l);

@@ -17,7 +17,7 @@
 //    the first of them a sparse sign sketch (one add per element; SvdOptions::sparse_sketch).
 //    power: Halko, Martinsson, Tropp 2011, Alg. 4.4 with re-orthonormalised power iterations:
 //    sketch Y = B Omega, q power iterations, Q = orth(Y), then the small SVD of Q^T B; 2q + 2
-//    passes. The out-of-core path (codecs/fmf/ooc_svd.h) streams this one.
+//    passes. The out-of-core path (codecs/fmf/ooc_svd.h) streams block Krylov on the rows side.
 //
 // Output: U (m x C, orthonormal columns) and SxV = B^T U (n x C, the right singular vectors
 // already multiplied by the singular values, seed 000 section 4: V := V Sigma), so that
@@ -31,6 +31,7 @@
 #include <string>
 
 #include "core/progress.h"
+#include "core/sparse_sketch.h"
 #include "core/status.h"
 
 namespace btfc {
@@ -84,6 +85,32 @@ void top_eigenpairs(const Eigen::MatrixXd& G, Eigen::Index l, Eigen::VectorXd& l
 // reached. Shared by truncated_svd and the out-of-core path (ooc_svd.h).
 int choose_rank(const Eigen::VectorXd& lambda, double total, const SvdOptions& opt, int& data_rank, bool& reached);
 
+
+// X := an orthonormal basis of X's columns that is orthogonal to the first `used` columns of P
+// (orthonormal), in double: block Gram-Schmidt and Cholesky QR, twice, Householder where a
+// round is ill-conditioned; columns that lie in span(P) to double precision are replaced by
+// pseudo-random ones (svd.cpp). The block step of both block Krylov SVDs (in core: the texel
+// side; streamed, ooc_svd.h: the rows side).
+void orthonormalize_against(const Eigen::Ref<const Eigen::MatrixXd>& P, Eigen::Index used, Eigen::Ref<Eigen::MatrixXd> X);
+
+// Block Krylov's first test matrix on B's m rows (both block Krylov SVDs begin with B^T Omega):
+// Omega = S G, a sparse sign sketch S (m x s, two +-1 per row) and a Gaussian G (s x l), when
+// opt.sparse_sketch and m >= 4 s, s = 4 l rounded up to a multiple of 128, 256 <= s <= 1024;
+// else a dense Gaussian Omega (m x l) in G and S.s == 0. Deterministic for opt.seed.
+struct RowSketch {
+  SparseSign S;
+  Eigen::MatrixXf G;
+  bool sparse() const { return S.s > 0; }
+};
+RowSketch make_row_sketch(size_t m, Eigen::Index l, const SvdOptions& opt);
+// Z = B^T Omega (n x l, sized by the caller) for B m x n column-major; adds ||B||_F^2 (double, in
+// an order fixed by n, not by the thread count) to *energy when given.
+void row_sketch_product(const float* B, size_t n, const RowSketch& sketch, Eigen::Ref<Eigen::MatrixXf> Z, double* energy = nullptr);
+
+// Block Krylov's error-driven stop: after at least two blocks, stop once a block improved the
+// rank-C error by at most this fraction of itself (the remaining gap to the optimum is then a
+// fraction of that).
+constexpr double k_krylov_stop = 2e-3;
 
 // B is column-major with leading dimension m. Fails on m == 0 or n == 0.
 Result<SvdResult> truncated_svd(const float* B, size_t m, size_t n, const SvdOptions& opt);

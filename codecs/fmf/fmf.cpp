@@ -24,7 +24,7 @@ const ParamSpec k_params[] = {
     {"oversample", ParamSpec::Type::integer, "16", 0, 1024, {}, "randomized SVD: extra sketch columns"},
     {"power_iters", ParamSpec::Type::integer, "4", 0, 32, {},
      "randomized SVD: iterations q (in core: block Krylov, at most q + 1 blocks of 2 passes, stops when converged; "
-     "out of core: q power iterations)"},
+     "out of core: block Krylov on the rows side, at most q + 2 reads of the data, stops when converged)"},
     {"precision", ParamSpec::Type::choice, "half", 0, 0, {"half", "float", "q"},
      "storage of U and SxV: half / float, or q = per-component quantized integers, zstd-coded (fmf_quant.h)"},
     {"bits", ParamSpec::Type::integer, "8", 2, 20, {}, "precision=q: step = 2^-bits x RMS of the strongest eigen-texture (SxV column), U column k's step / sigma_k (equal error per component)"},

@@ -41,9 +41,30 @@ Result<StreamPlan> plan_streamed_fmf(const Params& p, const BtfDesc& desc, size_
     plan.note = "svd=auto: randomized (in core exact through the texels x texels Gram matrix, which does not stream)";
   // Finished blocks wait for the model while the next channel runs (dfmf: y and u during v).
   const uint64_t finished = plan.dfmf ? n * 4 * (rank + chroma) : 0, base = finished + (uint64_t(16) << 20);
-  // Randomized: Y (double) + the allreduce buffer (double) + Q, Z, Yf (float) on the rows; W^T,
-  // SxV (float) and the Gaussian rows on the texels; 16 MiB for small matrices and stacks.
-  const uint64_t randomized = m * plan.l * (8 + 8 + 4 + 4 + 4) + n * plan.l * (4 + 4) + base;
+  // Randomized (block Krylov, ooc_svd.h), keeping k blocks of l (width w = k l): on the rows the
+  // basis P (double) and, in the passes, the sum buffer (double), Q and B Z (float); on the
+  // texels W^T (w, float) and SxV or the Gaussian rows (l); the Gram matrices; 16 MiB for small
+  // matrices and stacks.
+  auto randomized_bytes = [&](uint64_t k) {
+    const uint64_t width = k * plan.l;
+    return m * (8 * width + 16 * plan.l) + n * (width + plan.l) * 4 + width * width * 8 * 3 + base;
+  };
+  // All q + 1 blocks when the chunks keep at least half the scan lines they have with one block
+  // (the power iterations' footprint); else the newest blocks that do (a window, ooc_svd.h).
+  const uint64_t max_blocks = std::max<uint64_t>(1, std::min<uint64_t>(uint64_t(p.get_int("power_iters")) + 1, std::min(m, n) / plan.l));
+  auto lines = [&](uint64_t k) {
+    StreamSizing z;
+    z.fixed_bytes = randomized_bytes(k), z.bytes_per_value = k_stream_bytes_per_value;
+    return stream_lines_per_chunk(desc, z, max_bytes);
+  };
+  const uint32_t floor_lines = std::max<uint32_t>(1, lines(1) / 2);
+  plan.kept_blocks = 1;
+  for (uint64_t k = max_blocks; k > 1; --k)
+    if (lines(k) >= floor_lines) {
+      plan.kept_blocks = int(k);
+      break;
+    }
+  const uint64_t randomized = randomized_bytes(uint64_t(plan.kept_blocks));
   const uint64_t exact = fmf::streaming_exact_bytes(m) + n * max_rank * 4 + base;  // + SxV
   // Only the Gram part is the exact path's own; when the factors (texel side, needed by either
   // path) do not fit, the caller's chunk sizing reports the whole need.
@@ -58,7 +79,7 @@ Result<StreamPlan> plan_streamed_fmf(const Params& p, const BtfDesc& desc, size_
     plan.note = "svd=" + svd + ": randomized, the exact path's " + what + " does not fit " + format_bytes(max_bytes);
   }
   plan.fixed_bytes = plan.exact ? exact : randomized;
-  plan.passes = (plan.exact ? 2 : int(p.get_int("power_iters")) + 2) * (plan.dfmf ? 3 : 1);
+  plan.passes = (plan.exact ? 2 : int(max_blocks) + 1) * (plan.dfmf ? 3 : 1);  // at most: Krylov may stop early
   return plan;
 }
 
@@ -103,7 +124,7 @@ Result<StreamedEncode> encode_fmf_streamed(const ChunkSource& src, const BtfDesc
   auto factor = [&](const ChunkSource& s, int max_rank) -> Result<SvdResult> {
     opt.max_rank = max_rank;
     StreamStats st;
-    auto r = plan.exact ? fmf::streaming_exact_svd(s, out.chunks, opt, coll, &st) : fmf::streaming_svd(s, out.chunks, opt, coll, &st);
+    auto r = plan.exact ? fmf::streaming_exact_svd(s, out.chunks, opt, coll, &st) : fmf::streaming_svd(s, out.chunks, opt, coll, &st, plan.kept_blocks);
     add_stats(out.stats, std::move(st));
     return r;
   };

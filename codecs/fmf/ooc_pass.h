@@ -29,7 +29,8 @@ class PassRunner {
   // fn(chunk, B, count) for every owned chunk in order (B: rows x count column-major floats, valid
   // during the call), then pack(sums) copies the local result into sums[0, payload), then the
   // collective sum of payload + 1 doubles (the last one is the error flag). Afterwards sums()
-  // holds the global sums.
+  // holds the global sums. sums() is zeroed to payload + 1 values before the chunks, so fn may
+  // add into it directly instead (its data() may move between passes, not within one).
   Status pass(size_t payload, const std::function<void(size_t c, const float* B, size_t count)>& fn,
               const std::function<void(double* sums)>& pack);
   std::vector<double>& sums() { return m_buf; }

@@ -2,18 +2,25 @@
 // read in column chunks, never held whole. Two algorithms, both ending every pass with one
 // collective sum (the pass machinery and its failure handling are shared: ooc_pass.h).
 //
-// Randomized (streaming_svd): Halko, Martinsson, Tropp 2011, Alg. 4.4 (randomized range finder
-// with power iterations), arranged so that every pass reads B exactly once:
-//   pass 0        Y = B Omega, ||B||_F^2                      (Omega: n x l Gaussian, l = C + p)
-//   pass 1..q     Y = B (B^T Q)  with Q = orth(Y) before each pass  (per chunk: Z_c = B_c^T Q,
-//                 Y += B_c Z_c while the chunk is in memory)
-//   pass q+1      W^T = B^T Q and G = W W^T (l x l)
-//   then          G = E Lambda E^T, U = Q E_k, SxV = W^T E_k   (k by choose_rank)
-// The in-core path (svd.h) applies B and B^T the same number of times (1 + 2q + 1) but reads B
-// 2q + 2 times; here it is q + 2 reads, each doing two GEMMs per chunk. The only difference is
-// that Z = B^T Q is not re-orthonormalised between the two products (Y is, in double, after
-// every pass); with float data and the ranks fmf uses this changes the error by far less than
-// 1 % (tests/ooc_test.cpp checks it against the in-core path).
+// Randomized (streaming_svd): randomized block Krylov (Musco and Musco 2015) on the rows side,
+// arranged so that every pass reads B exactly once and does at most two products per chunk:
+//   pass 0        Y = B (B^T Omega), ||B||_F^2   (Omega on the rows, m x l, l = C + p: the in-core
+//                 path's first test matrix, svd.h make_row_sketch, a sparse sign sketch S times a
+//                 Gaussian, so B^T Omega costs ~ a read and the pass one GEMM); Q_1 = orth(Y)
+//   pass b        Y = B Z with Z = B^T Q_b (per chunk, while it is in memory); Z is kept: it is
+//                 block b of W^T = B^T P. Q_{b+1} = orth(Y) against the kept blocks (svd.h,
+//                 orthonormalize_against), P = [Q_1 .. Q_{b+1}] (m x (b + 1) l, double)
+//   last pass     the newest block's B^T Q (one product) completes W^T; G = W W^T
+//   then          G = E Lambda E^T, U = P E_k, SxV = W^T E_k   (k by choose_rank)
+// At most q + 1 blocks (q + 2 reads, as many as the power iterations this replaced). The
+// in-core error-driven stop ends it earlier: after pass b the Gram matrix P^T B B^T P of the
+// blocks so far is known without a pass (its newest block column is P^T Y), so is the rank-C
+// error of that basis, and once a block gains at most k_krylov_stop of it the basis takes
+// Q_{b+1} (free) and the last pass follows. Under a tight memory limit P holds only kept_blocks
+// blocks: when full, it restarts from its best (kept - 1) l Ritz vectors P E (and W^T from W^T E),
+// then adds the next block (kept 1: the power iterations). The in-core path runs the same
+// iteration on the texel side; tests/ooc_test.cpp checks both against each other and against
+// the exact SVD.
 //
 // Exact (streaming_exact_svd, ooc_exact.cpp): the in-core exact path's rows-side Gram method in
 // two passes: pass 1 G = sum_c B_c B_c^T (m x m, double) and ||B||_F^2, then G = E Lambda E^T
@@ -22,8 +29,8 @@
 // (few directions, any number of texels). The in-core path's other side (B^T B when texels < m)
 // is not streamed: it would need every pair of chunks at once.
 //
-// Omega's rows for chunk c come from an RNG seeded by (seed, first texel of c), so the result
-// does not depend on how chunks are spread over processes. Every pass ends with one collective
+// Omega depends on the seed and m only, so the result does not depend on how chunks are spread
+// over processes. Every pass ends with one collective
 // sum over processes (Collective::allreduce_sum) of the m x l (or l x l, or G's lower triangle)
 // matrix plus one error flag: a process that fails to read or decode a chunk still joins the
 // sum, the flag makes every process stop, and Collective::agree hands all of them the failing
@@ -32,7 +39,7 @@
 //
 // Memory: one raw chunk buffer and two float chunks (a helper thread reads and decodes the next
 // chunk while the current one is multiplied), or two mapped chunks for a mappable source, plus
-// O((m + n_local) l) for Y, Q and W^T (randomized) or streaming_exact_bytes(m) (exact). The
+// O((m + n_local) kept l) for P and W^T (randomized) or streaming_exact_bytes(m) (exact). The
 // caller sizes chunks so this stays under its limit (ooc_fmf.h).
 #pragma once
 #include <cstdint>
@@ -49,9 +56,10 @@ namespace btfc::fmf {
 // Factorizes B from `chunks` (the chunk indices this process owns; together the processes own
 // every chunk exactly once). Returns U (m x C) on every process and SxV (n x C, all texels) on
 // process 0 (elsewhere SxV is empty). opt.method is ignored (always randomized); l is clamped
-// to min(m, n).
+// to min(m, n). kept_blocks > 0 caps the blocks P holds (memory: plan_streamed_fmf); with fewer
+// than q + 1, P restarts from its Ritz vectors when full (above), 1 being the power iterations.
 Result<SvdResult> streaming_svd(const ChunkSource& src, const std::vector<size_t>& chunks, const SvdOptions& opt, Collective& coll,
-                                StreamStats* stats = nullptr);
+                                StreamStats* stats = nullptr, int kept_blocks = 0);
 
 // The same contract, exactly (the top singular triplets up to double round-off, as truncated_svd
 // with SvdMethod::exact when m <= n) in 2 passes; opt.method, oversample, power_iters and seed
