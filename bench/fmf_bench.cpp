@@ -16,9 +16,11 @@
 //             [--dump-only]  (with --dump: stop after writing the file)
 //             [--dense-start]  (krylov: a Gaussian first block instead of the sparse sign sketch)
 //             [--seed 1]  (the test matrix's seed)
-//             [--streamed K [--chunk 256]]  (with --load: the out-of-core SVD, codecs/fmf/ooc_svd.h,
-//             over chunks of 256 texels mapped from memory as a raw .btfc's are from the page
-//             cache, holding K Krylov blocks, 0 = all; the MPI path runs the same passes)
+//             [--streamed K [--chunk N]]  (with --load: the out-of-core SVD, codecs/fmf/ooc_svd.h,
+//             over chunks of N texels mapped from memory as a raw .btfc's are from the page
+//             cache, holding K Krylov blocks, 0 = all; the MPI path runs the same passes. N
+//             defaults to the CLI's largest chunk: whole scan lines of 256 texels within 64 M
+//             values, codecs/streaming.cpp)
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -53,7 +55,7 @@ int main(int argc, char** argv) {
   RandomizedScheme scheme = RandomizedScheme::block_krylov;
   bool dense_start = false;
   uint64_t seed = 1;
-  int streamed = -1, chunk = 256;
+  int streamed = -1, chunk = 0;
   std::string dump, codec_spec, load;
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
@@ -74,7 +76,7 @@ int main(int argc, char** argv) {
     else if (a == "--dense-start") dense_start = true;
     else if (a == "--seed") seed = uint64_t(next());
     else if (a == "--streamed") streamed = next();
-    else if (a == "--chunk") chunk = std::max(1, next());
+    else if (a == "--chunk") chunk = std::max(1, next());  // texels
     else if (a == "--scheme" && i + 1 < argc) scheme = std::string(argv[++i]) == "power" ? RandomizedScheme::power : RandomizedScheme::block_krylov;
     else {
       std::fprintf(stderr, "unknown argument %s\n", a.c_str());
@@ -119,7 +121,8 @@ int main(int argc, char** argv) {
       bool mappable() const override { return true; }
       Result<const float*> map(size_t c) const override { return B + chunk_first(c) * m; }
     } src;
-    src.B = B, src.m = m, src.n = n, src.per = size_t(chunk);
+    const size_t lines = std::max<size_t>(1, (size_t(64) << 20) / (m * 256));
+    src.B = B, src.m = m, src.n = n, src.per = chunk > 0 ? size_t(chunk) : lines * 256;
     SvdOptions opt;
     opt.max_rank = rank, opt.power_iters = power, opt.oversample = over, opt.seed = seed;
     Collective one;
@@ -131,8 +134,9 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "%s\n", r.status().message().c_str());
       std::exit(3);
     }
-    std::printf("streamed   rank %d q %d p %d kept %d: %.2f s, rel L2 error %.6f, %d passes (%d blocks), peak RSS %.2f GB (%.2f x input)\n",
-                rank, power, over, streamed, secs, r->rel_error_estimate(), st.passes, r->iterations, peak_rss_gb(),
+    const std::string variant = streamed == 0 ? "krylov" : "window" + std::to_string(streamed);
+    std::printf("streamed   rank %d q %d p %d %s: %.2f s, rel L2 error %.6f, %d passes (%d blocks), chunks of %zu texels, peak RSS %.2f GB (%.2f x input)\n",
+                rank, power, over, variant.c_str(), secs, r->rel_error_estimate(), st.passes, r->iterations, src.per, peak_rss_gb(),
                 peak_rss_gb() / input_gb);
     std::printf("           pass seconds:");
     for (double p : st.pass_seconds) std::printf(" %.2f", p);

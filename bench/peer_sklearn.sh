@@ -13,6 +13,9 @@
 #   btfc     block Krylov q 1 p 16: 2 blocks, 4 passes
 #   sklearn  n_iter=1, power_iteration_normalizer="LU": also 4 passes (its default for n_iter <= 2
 #            is no normalisation, which loses the small components in float32 from n_iter 2 on)
+#   streamed bench_fmf --streamed 0: the out-of-core SVD (codecs/fmf/ooc_svd.h, the passes the
+#            out-of-core and MPI paths run) over the same matrix in the CLI's largest chunks,
+#            mapped from memory as a raw .btfc is from the page cache: q 4 and q 1, p 16
 # Each run is its own process: time of the factorization only (not the load), relative L2 error
 # sqrt(||B||^2 - sum s_i^2) / ||B|| (both approximations are orthogonal projections of B, so this
 # is their exact error), peak RSS (getrusage) over the input's size. Then, per rank, the ratio of
@@ -91,6 +94,7 @@ print(f"sklearn    rank {rank} q {q} p {p} {norm}: {secs:.2f} s, rel L2 error {e
 EOF
 }
 bt() { "$BENCH" --load "$MATRIX" --rows "$ROWS" --svd-only --rank "$1" --power-iters "$2" --oversample "$3" --scheme "$4" | grep '^fmf'; }
+st() { "$BENCH" --load "$MATRIX" --rows "$ROWS" --rank "$1" --power-iters "$2" --oversample "$3" --streamed 0 | grep '^streamed'; }
 
 echo "# peer_sklearn.sh: $(date -u +%FT%TZ), $(nproc) cores, load $(cut -d' ' -f1-3 /proc/loadavg), OPENBLAS_CORETYPE=${OPENBLAS_CORETYPE:-default}"
 echo "# sklearn $("$PY" -c 'import sklearn; print(sklearn.__version__)'), numpy $("$PY" -c 'import numpy; print(numpy.__version__)'), matrix $MATRIX"
@@ -103,6 +107,8 @@ for rep in $(seq 1 "$REPEAT"); do
     sk "$r" 3 16 | tee -a "$LOG"
     bt "$r" 1 16 krylov | tee -a "$LOG"
     sk "$r" 1 16 LU | tee -a "$LOG"
+    st "$r" 4 16 | tee -a "$LOG"
+    st "$r" 1 16 | tee -a "$LOG"
   done
 done
 echo "## summary (medians over the repetitions); equal error = within 1 % of the lowest error at that rank"
@@ -123,11 +129,12 @@ for rank in sorted({k[0] for k in runs}):
     for k, t, e, mem in sorted(rows, key=lambda r: (r[0][1], -r[0][3])):
         print(f"  {k[1]:8s} {k[2]:6s} q {k[3]} p {k[4]}: {t:7.2f} s  err {e:.6f} ({e / best:.4f} x lowest)  peak {mem:.2f} x input")
     ok = [r for r in rows if r[2] <= 1.01 * best]
-    b = [r for r in ok if r[0][1] == "fmf"]
     s = [r for r in ok if r[0][1] == "sklearn"]
-    if b and s:
-        fb, fs = min(b, key=lambda r: r[1]), min(s, key=lambda r: r[1])
-        print(f"  equal error: btfc {fb[0][2]} q {fb[0][3]} {fb[1]:.2f} s vs sklearn q {fs[0][3]} {fs[0][2]} {fs[1]:.2f} s"
-              f" -> ratio {fb[1] / fs[1]:.2f} (goal <= 0.5)")
+    for who, name in (("fmf", "btfc"), ("streamed", "btfc streamed")):
+        b = [r for r in ok if r[0][1] == who]
+        if b and s:
+            fb, fs = min(b, key=lambda r: r[1]), min(s, key=lambda r: r[1])
+            print(f"  equal error: {name} {fb[0][2]} q {fb[0][3]} {fb[1]:.2f} s vs sklearn q {fs[0][3]} {fs[0][2]} {fs[1]:.2f} s"
+                  f" -> ratio {fb[1] / fs[1]:.2f} (goal <= 0.5)")
 EOF
 rm -f "$LOG"
