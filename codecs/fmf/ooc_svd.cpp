@@ -35,7 +35,7 @@ Result<SvdResult> streaming_svd(const ChunkSource& src, const std::vector<size_t
   SingleThreadedBlas serial_blas;
   // Block Krylov on the rows side: blocks Q_1 = orth(B B^T Omega), Q_{b+1} = orth(B B^T Q_b) against
   // the kept ones, in P (m x kept l, double); at most q + 1 blocks, as in core. When fewer may be
-  // kept (memory), P is a window of the newest `kept` blocks (1: the power iterations).
+  // kept (memory), a full P restarts from its Ritz vectors (below; kept 1: the power iteration).
   const int max_blocks = int(std::max<Index>(1, std::min<Index>(opt.power_iters + 1, std::min<Index>(Index(m), Index(n)) / l)));
   const int kept = kept_blocks > 0 ? std::min(kept_blocks, max_blocks) : max_blocks;
   const Index width = Index(kept) * l;
