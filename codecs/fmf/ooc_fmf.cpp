@@ -50,7 +50,8 @@ Result<StreamPlan> plan_streamed_fmf(const Params& p, const BtfDesc& desc, size_
     return m * (8 * width + 16 * plan.l) + n * (width + plan.l) * 4 + width * width * 8 * 3 + base;
   };
   // All q + 1 blocks when the chunks keep at least half the scan lines they have with one block
-  // (the power iterations' footprint); else the newest blocks that do (a window, ooc_svd.h).
+  // (the power iteration's footprint); else as many as do (a full basis then restarts from its
+  // Ritz vectors, ooc_svd.h).
   const uint64_t max_blocks = std::max<uint64_t>(1, std::min<uint64_t>(uint64_t(p.get_int("power_iters")) + 1, std::min(m, n) / plan.l));
   auto lines = [&](uint64_t k) {
     StreamSizing z;
