@@ -4,8 +4,10 @@
 // encoders, btfc-mpi's MPI collective). Rows are a texel's values (directions x channels), a
 // chunk is a contiguous run of texels (columns).
 #pragma once
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <string>
 #include <vector>
 
@@ -65,6 +67,34 @@ class Collective {
   virtual Status agree(const Status& local) { return local; }
   // Process 0's `s` on every process (one process: unchanged).
   virtual Status broadcast(std::string& s) { return {}; }
+};
+
+// A column-major rows x texels float matrix already in memory (an in-memory Btf's data) as chunks
+// of `per` texels, mapped without a copy: in-memory data through the streamed passes (fmf's
+// color=dfmf encode, codecs/fmf/ooc_svd.h). The matrix must outlive the source.
+class MatrixChunks final : public ChunkSource {
+ public:
+  MatrixChunks(const float* data, size_t rows, size_t texels, size_t per)
+      : m_data(data), m_rows(rows), m_texels(texels), m_per(per ? per : 1) {}
+  size_t rows() const override { return m_rows; }
+  size_t num_chunks() const override { return (m_texels + m_per - 1) / m_per; }
+  size_t chunk_first(size_t c) const override { return c * m_per; }
+  size_t chunk_count(size_t c) const override { return std::min(m_per, m_texels - c * m_per); }
+  size_t raw_bytes(size_t c) const override { return chunk_count(c) * m_rows * sizeof(float); }
+  Status read(size_t c, void* raw) const override {
+    std::memcpy(raw, m_data + chunk_first(c) * m_rows, raw_bytes(c));
+    return {};
+  }
+  Status decode(size_t c, const void* raw, float* dst) const override {
+    std::memcpy(dst, raw, raw_bytes(c));
+    return {};
+  }
+  bool mappable() const override { return true; }
+  Result<const float*> map(size_t c) const override { return m_data + chunk_first(c) * m_rows; }
+
+ private:
+  const float* m_data;
+  size_t m_rows, m_texels, m_per;
 };
 
 // The chunks process `rank` of `size` owns: a contiguous range, balanced by chunk count.

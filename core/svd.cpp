@@ -589,15 +589,18 @@ Result<SvdResult> truncated_svd(const float* B, size_t m, size_t n, const SvdOpt
   if (m == 0 || n == 0) return invalid_argument("SVD of an empty matrix");
   if (opt.max_rank < 1) return invalid_argument("SVD rank must be >= 1");
   ConstMapF map(B, Index(m), Index(n));
+  return resolved_method(m, n, opt) == SvdMethod::exact ? exact_svd(map, opt) : randomized_svd(map, opt);
+}
+
+SvdMethod resolved_method(size_t m, size_t n, const SvdOptions& opt) {
   SvdMethod method = opt.method;
   const size_t small = std::min(m, n);
   if (method == SvdMethod::automatic)
     method = small <= 1024 || (small <= k_exact_auto_max && size_t(opt.max_rank + opt.oversample) * 8 >= small) ? SvdMethod::exact
                                                                                                           : SvdMethod::randomized;
   // The randomized sketch cannot exceed the small side; then the exact path is both exact and cheap.
-  if (method == SvdMethod::randomized && size_t(opt.max_rank) + size_t(opt.oversample) >= std::min(m, n))
-    method = SvdMethod::exact;
-  return method == SvdMethod::exact ? exact_svd(map, opt) : randomized_svd(map, opt);
+  if (method == SvdMethod::randomized && size_t(opt.max_rank) + size_t(opt.oversample) >= small) method = SvdMethod::exact;
+  return method;
 }
 
 ExactSvdReuse::ExactSvdReuse() {

@@ -114,6 +114,9 @@ constexpr double k_krylov_stop = 2e-3;
 
 // B is column-major with leading dimension m. Fails on m == 0 or n == 0.
 Result<SvdResult> truncated_svd(const float* B, size_t m, size_t n, const SvdOptions& opt);
+// The method truncated_svd runs for an m x n matrix: opt.method with automatic resolved (above),
+// and exact whenever rank + oversample reaches the small side.
+SvdMethod resolved_method(size_t m, size_t n, const SvdOptions& opt);
 
 // While one of these is alive, the exact path keeps the eigendecompositions of the Gram matrices
 // it computes (the last three) and reuses one for a matrix of the same shape and content (a

@@ -123,6 +123,10 @@ Result<std::unique_ptr<Model>> make_dfmf_model_from_svd(const BtfDesc& desc, con
 // every k). The one definition both the in-core encode and the streamed one (ooc_dfmf.h) use,
 // so the two factorize the same matrices.
 size_t dfmf_channel(const float* abrdf, size_t rows, int k, float offset, float* out);
+// All three channels at once (y, u, v: rows floats each), vectorized; dfmf_channel returns the
+// same bits. Y' = log is computed by a polynomial within 2e-7 relative of std::log (std::log
+// itself for sums that are not normal finite floats).
+size_t dfmf_channels(const float* abrdf, size_t rows, float offset, float* y, float* u, float* v);
 // The automatic offset (offset=0): adds one texel's sum of Y and of Y^2 (Y clamped to >= 0) to
 // *sum_y, *sum_y2; dfmf_auto_offset turns the BTF's sums into e = sum Y^2 / sum Y (1e-5 when
 // that is smaller or undefined). The streamed encode sums the same way over its chunks.

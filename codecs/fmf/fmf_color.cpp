@@ -1,10 +1,14 @@
 // fmf's colour transforms (fmf_model.h): dfmf's log-luminance / chroma channels with their
 // offset, Bonn's colour models for factorizations read from Bonn files, and those
 // factorizations as models (make_fmf_model, fmf.h).
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
+#include <cstring>
 
 #include "codecs/fmf/fmf_model.h"
+#include "core/cpu_dispatch.h"
 
 namespace btfc {
 namespace fmf {
@@ -127,14 +131,98 @@ Result<std::unique_ptr<Model>> make_fmf_model(const BtfDesc& desc, int cm, std::
   return std::unique_ptr<Model>(std::move(model));
 }
 
-size_t dfmf_channel(const float* abrdf, size_t rows, int k, float offset, float* out) {
+namespace {
+
+// log(x) for normal finite x > 0 in plain arithmetic the compiler vectorizes (std::log is a call
+// per value: the conversion of a UBO2003-size BTF took 0.13 s per 3328-texel chunk with it,
+// 0.017 s vectorized, measured in a scratch harness). Cephes' logf: x = 2^e m, m in
+// [sqrt(1/2), sqrt(2)), a degree-9 polynomial in m - 1; within 2e-7 relative of std::log on
+// the data measured. Callers send other x (zero, denormal, inf, NaN) to std::log.
+inline float log_normal(float x) {
+  uint32_t i;
+  std::memcpy(&i, &x, 4);
+  int e = int((i >> 23) & 0xff) - 126;
+  const uint32_t mi = (i & 0x7fffffu) | 0x3f000000u;  // [0.5, 1)
+  float m;
+  std::memcpy(&m, &mi, 4);
+  const bool low = m < 0.70710678f;
+  e -= int(low);
+  m = (low ? m + m : m) - 1.0f;
+  const float z = m * m;
+  float y = 7.0376836292e-2f;
+  y = y * m - 1.1514610310e-1f;
+  y = y * m + 1.1676998740e-1f;
+  y = y * m - 1.2420140846e-1f;
+  y = y * m + 1.4249322787e-1f;
+  y = y * m - 1.6668057665e-1f;
+  y = y * m + 2.0000714765e-1f;
+  y = y * m - 2.4999993993e-1f;
+  y = y * m + 3.3333331174e-1f;
+  y = y * m * z;
+  const float fe = float(e);
+  y += -2.12194440e-4f * fe;
+  y += -0.5f * z;
+  return (m + y) + 0.693359375f * fe;
+}
+
+// The three channels of `rows` RGB triples; the body of both builds below. The arithmetic is the
+// same IEEE operations in the same order in both (no FMA: btfc compiles without contraction), so
+// the AVX-512 build returns the generic build's bits.
+__attribute__((always_inline)) inline size_t channels_body(const float* abrdf, size_t rows, float offset, float* y, float* u,
+                                                          float* v) {
   size_t clamped = 0;
+  int odd = 0;
+  const float a0 = k_yuv.m[0][0], a1 = k_yuv.m[0][1], a2 = k_yuv.m[0][2], b0 = k_yuv.m[1][0], b1 = k_yuv.m[1][1],
+              b2 = k_yuv.m[1][2], c0 = k_yuv.m[2][0], c1 = k_yuv.m[2][1], c2 = k_yuv.m[2][2];
+#pragma omp simd reduction(+ : clamped) reduction(| : odd)
   for (size_t r = 0; r < rows; ++r) {
-    const float* rgb = abrdf + 3 * r;
-    float y = k_yuv.m[0][0] * rgb[0] + k_yuv.m[0][1] * rgb[1] + k_yuv.m[0][2] * rgb[2];
-    if (y < 0) y = 0, ++clamped;
-    if (k > 0) out[r] = (k_yuv.m[k][0] * rgb[0] + k_yuv.m[k][1] * rgb[1] + k_yuv.m[k][2] * rgb[2]) / (y + offset);
-    else out[r] = std::log(y + offset);
+    const float R = abrdf[3 * r], G = abrdf[3 * r + 1], B = abrdf[3 * r + 2];
+    float l = a0 * R + a1 * G + a2 * B;
+    clamped += size_t(l < 0);
+    l = std::max(l, 0.0f);
+    const float d = l + offset;
+    u[r] = (b0 * R + b1 * G + b2 * B) / d;
+    v[r] = (c0 * R + c1 * G + c2 * B) / d;
+    y[r] = log_normal(d);
+    odd |= int(!(d >= 1.17549435e-38f) | !(d <= 3.40282347e38f));
+  }
+  if (odd)  // zero, denormal, inf or NaN sums: std::log's answer (NaN stays NaN)
+    for (size_t r = 0; r < rows; ++r) {
+      const float d = std::max(a0 * abrdf[3 * r] + a1 * abrdf[3 * r + 1] + a2 * abrdf[3 * r + 2], 0.0f) + offset;  // as above: NaN stays
+      if (!(d >= 1.17549435e-38f && d <= 3.40282347e38f)) y[r] = std::log(d);
+    }
+  return clamped;
+}
+
+size_t channels_generic(const float* abrdf, size_t rows, float offset, float* y, float* u, float* v) {
+  return channels_body(abrdf, rows, offset, y, u, v);
+}
+#if defined(__x86_64__) && defined(__GNUC__)
+__attribute__((target("avx512f"))) size_t channels_avx512(const float* abrdf, size_t rows, float offset, float* y, float* u, float* v) {
+  return channels_body(abrdf, rows, offset, y, u, v);
+}
+#endif
+
+}  // namespace
+
+size_t dfmf_channels(const float* abrdf, size_t rows, float offset, float* y, float* u, float* v) {
+#if defined(__x86_64__) && defined(__GNUC__)
+  static const bool avx512 = cpu_has_avx512f();
+  if (avx512) return channels_avx512(abrdf, rows, offset, y, u, v);
+#endif
+  return channels_generic(abrdf, rows, offset, y, u, v);
+}
+
+size_t dfmf_channel(const float* abrdf, size_t rows, int k, float offset, float* out) {
+  // dfmf_channels in blocks, keeping channel k: the same bits as the fused path.
+  constexpr size_t k_block = 512;
+  float buf[2][k_block];
+  size_t clamped = 0;
+  for (size_t r = 0; r < rows; r += k_block) {
+    const size_t h = std::min(k_block, rows - r);
+    float* ch[3];
+    for (int i = 0, b = 0; i < 3; ++i) ch[i] = i == k ? out + r : buf[b++];  // channel k straight into out
+    clamped += dfmf_channels(abrdf + 3 * r, h, offset, ch[0], ch[1], ch[2]);
   }
   return clamped;
 }

@@ -72,7 +72,10 @@ Status DfmfChannelSource::luminance_moments(const ChunkSource& base, const std::
       if (!local.ok()) break;
       b = values.data();
     }
-    for (size_t t = 0; t < count; ++t) dfmf_luminance_moments(b + t * in_rows, in_rows / 3, &sums[0], &sums[1]);
+    double sy = 0, sy2 = 0;  // in parallel: serial, this pass took 5.3 s of a 17.6 s UBO2003-size encode
+#pragma omp parallel for reduction(+ : sy, sy2) schedule(static)
+    for (long long t = 0; t < (long long)count; ++t) dfmf_luminance_moments(b + size_t(t) * in_rows, in_rows / 3, &sy, &sy2);
+    sums[0] += sy, sums[1] += sy2;
     if (base.mappable()) base.unmap(c, b);
   }
   // Every process joins the sum, then all agree on the first failure (no process waits alone).
@@ -86,6 +89,30 @@ uint64_t DfmfChannelSource::clamped() const {
   uint64_t total = 0;
   for (size_t c = 0; c < num_chunks(); ++c) total += m_clamped[c];
   return total;
+}
+
+Result<std::vector<SvdResult>> dfmf_streaming_svds(const ChunkSource& base, const std::vector<size_t>& chunks, float offset,
+                                                   const SvdOptions& opt_y, const SvdOptions& opt_c, Collective& coll,
+                                                   StreamStats* stats, int kept_blocks, double* clamped) {
+  const size_t in_rows = base.rows(), rows = in_rows / 3;
+  if (in_rows % 3 != 0 || rows == 0)
+    return invalid_argument("color=dfmf needs 3 channels: the BTF matrix has " + std::to_string(in_rows) + " rows");
+  // Per chunk, set (not added) on the chunk's first part of every pass: each chunk counts once.
+  std::vector<uint64_t> per_chunk(base.num_chunks(), 0);
+  fmf::ChunkSplit split;
+  split.channels = 3, split.rows = rows;
+  split.split = [&](size_t c, size_t o, const float* B, size_t k, float* const* out) {
+    uint64_t n = 0;
+#pragma omp parallel for reduction(+ : n) schedule(static)
+    for (long long t = 0; t < (long long)k; ++t) {
+      const size_t at = size_t(t) * rows;
+      n += dfmf_channels(B + size_t(t) * in_rows, rows, offset, out[0] + at, out[1] + at, out[2] + at);
+    }
+    per_chunk[c] = (o == 0 ? 0 : per_chunk[c]) + n;
+  };
+  auto rs = fmf::streaming_svds(base, chunks, &split, {opt_y, opt_c, opt_c}, coll, stats, kept_blocks);
+  for (size_t c : chunks) *clamped += double(per_chunk[c]);
+  return rs;
 }
 
 }  // namespace btfc

@@ -60,4 +60,15 @@ class DfmfChannelSource final : public ChunkSource {
   std::unique_ptr<std::atomic<uint64_t>[]> m_clamped;  // per chunk; set (not added) by every load
 };
 
+// The three channel matrices of `base` (rows = 3 x num_images) factorized in one stream
+// (fmf::streaming_svds): each pass converts every part of a chunk once into Y', U', V'
+// (dfmf_channels, in parallel over texels) and runs each channel's products on it, so a pass
+// reads the BTF once for all three (DfmfChannelSource: once per channel). opt_y for Y', opt_c for
+// U' and V'. Adds to *clamped the luminance values clamped in this process's chunks (each
+// counted once). Besides streaming_svd's memory per channel, the parts take at most a chunk's
+// values in floats.
+Result<std::vector<SvdResult>> dfmf_streaming_svds(const ChunkSource& base, const std::vector<size_t>& chunks, float offset,
+                                                   const SvdOptions& opt_y, const SvdOptions& opt_c, Collective& coll,
+                                                   StreamStats* stats, int kept_blocks, double* clamped);
+
 }  // namespace btfc

@@ -39,15 +39,19 @@ Result<StreamPlan> plan_streamed_fmf(const Params& p, const BtfDesc& desc, size_
   plan.exact = svd == "exact" || (svd == "auto" && m <= 1024) || max_rank + uint64_t(p.get_int("oversample")) >= m;
   if (!plan.exact && svd == "auto" && std::min(m, n) <= 1024)
     plan.note = "svd=auto: randomized (in core exact through the texels x texels Gram matrix, which does not stream)";
-  // Finished blocks wait for the model while the next channel runs (dfmf: y and u during v).
-  const uint64_t finished = plan.dfmf ? n * 4 * (rank + chroma) : 0, base = finished + (uint64_t(16) << 20);
-  // Randomized (block Krylov, ooc_svd.h), keeping k blocks of l (width w = k l): on the rows the
-  // basis P (double) and, in the passes, the sum buffer (double), Q and B Z (float); on the
-  // texels W^T (w, float) and SxV or the Gaussian rows (l); the Gram matrices; 16 MiB for small
-  // matrices and stacks.
+  // Exact dfmf factorizes one channel after the other: finished blocks wait for the model while
+  // the next channel runs (y and u during v). Randomized dfmf runs the three in one stream.
+  const uint64_t finished = plan.dfmf ? n * 4 * (rank + chroma) : 0, base = uint64_t(16) << 20;
+  const uint64_t channels = plan.dfmf ? 3 : 1;
+  // The randomized dfmf stream's split parts (ooc_svd.h) hold at most a chunk's values as floats.
+  plan.bytes_per_value = k_stream_bytes_per_value + (plan.dfmf ? 4 : 0);
+  // Randomized (block Krylov, ooc_svd.h), keeping k blocks of l (width w = k l), per channel: on
+  // the rows the basis P (double) and, in the passes, the sum buffer (double), Q and B Z (float);
+  // on the texels W^T (w, float) and SxV or the Gaussian rows (l); the Gram matrices; 16 MiB for
+  // small matrices and stacks.
   auto randomized_bytes = [&](uint64_t k) {
     const uint64_t width = k * plan.l;
-    return m * (8 * width + 16 * plan.l) + n * (width + plan.l) * 4 + width * width * 8 * 3 + base;
+    return channels * (m * (8 * width + 16 * plan.l) + n * (width + plan.l) * 4 + width * width * 8 * 3) + base;
   };
   // All q + 1 blocks when the chunks keep at least half the scan lines they have with one block
   // (the power iteration's footprint); else as many as do (a full basis then restarts from its
@@ -55,7 +59,7 @@ Result<StreamPlan> plan_streamed_fmf(const Params& p, const BtfDesc& desc, size_
   const uint64_t max_blocks = std::max<uint64_t>(1, std::min<uint64_t>(uint64_t(p.get_int("power_iters")) + 1, std::min(m, n) / plan.l));
   auto lines = [&](uint64_t k) {
     StreamSizing z;
-    z.fixed_bytes = randomized_bytes(k), z.bytes_per_value = k_stream_bytes_per_value;
+    z.fixed_bytes = randomized_bytes(k), z.bytes_per_value = plan.bytes_per_value;
     return stream_lines_per_chunk(desc, z, max_bytes);
   };
   const uint32_t floor_lines = std::max<uint32_t>(1, lines(1) / 2);
@@ -66,7 +70,7 @@ Result<StreamPlan> plan_streamed_fmf(const Params& p, const BtfDesc& desc, size_
       break;
     }
   const uint64_t randomized = randomized_bytes(uint64_t(plan.kept_blocks));
-  const uint64_t exact = fmf::streaming_exact_bytes(m) + n * max_rank * 4 + base;  // + SxV
+  const uint64_t exact = fmf::streaming_exact_bytes(m) + n * max_rank * 4 + finished + base;  // + SxV
   // Only the Gram part is the exact path's own; when the factors (texel side, needed by either
   // path) do not fit, the caller's chunk sizing reports the whole need.
   const uint64_t gram = fmf::streaming_exact_bytes(m) + (uint64_t(16) << 20);
@@ -80,13 +84,13 @@ Result<StreamPlan> plan_streamed_fmf(const Params& p, const BtfDesc& desc, size_
     plan.note = "svd=" + svd + ": randomized, the exact path's " + what + " does not fit " + format_bytes(max_bytes);
   }
   plan.fixed_bytes = plan.exact ? exact : randomized;
-  plan.passes = (plan.exact ? 2 : int(max_blocks) + 1) * (plan.dfmf ? 3 : 1);  // at most: Krylov may stop early
+  plan.passes = plan.exact ? 2 * int(channels) : int(max_blocks) + 1;  // at most: Krylov may stop early
   return plan;
 }
 
 StreamSizing stream_sizing(const StreamPlan& plan) {
   StreamSizing z;
-  z.passes = plan.passes, z.fixed_bytes = plan.fixed_bytes, z.bytes_per_value = k_stream_bytes_per_value, z.note = plan.note;
+  z.passes = plan.passes, z.fixed_bytes = plan.fixed_bytes, z.bytes_per_value = plan.bytes_per_value, z.note = plan.note;
   return z;
 }
 
@@ -153,11 +157,21 @@ Result<StreamedEncode> encode_fmf_streamed(const ChunkSource& src, const BtfDesc
     BTFC_ASSIGN_OR_RETURN(SvdResult r, factor(src, rank));
     rs.push_back(std::move(r));
   } else {
-    for (int k = 0; k < 3; ++k) {
-      const DfmfChannelSource channel(src, k, offset);
-      BTFC_ASSIGN_OR_RETURN(SvdResult r, factor(channel, k == 0 ? rank : (chroma ? chroma : rank)));
-      rs.push_back(std::move(r));
-      if (k == 0) clamped = double(channel.clamped());
+    if (plan.exact) {
+      for (int k = 0; k < 3; ++k) {
+        const DfmfChannelSource channel(src, k, offset);
+        BTFC_ASSIGN_OR_RETURN(SvdResult r, factor(channel, k == 0 ? rank : (chroma ? chroma : rank)));
+        rs.push_back(std::move(r));
+        if (k == 0) clamped = double(channel.clamped());
+      }
+    } else {
+      SvdOptions oy = opt, oc = opt;
+      oy.max_rank = rank, oc.max_rank = chroma ? chroma : rank;
+      StreamStats st;
+      auto r = dfmf_streaming_svds(src, out.chunks, offset, oy, oc, coll, &st, plan.kept_blocks, &clamped);
+      add_stats(out.stats, std::move(st));
+      if (!r.ok()) return r.status();
+      rs = std::move(r).value();
     }
     // Each process counted its own chunks; every process gets here (SVD failures are agreed).
     BTFC_RETURN_IF_ERROR(coll.allreduce_sum(&clamped, 1));

@@ -6,8 +6,10 @@
 //
 // Every fmf option streams:
 //   color=rgb   one factorization of the BTF matrix (rows = abrdf_size);
-//   color=dfmf  three, one per channel matrix (Y', U', V'; rows = num_images), each a
-//               DfmfChannelSource over the same chunks (ooc_dfmf.h): three times the passes;
+//   color=dfmf  three, one per channel matrix (Y', U', V'; rows = num_images): randomized, all
+//               three in one stream (dfmf_streaming_svds, ooc_dfmf.h: each pass reads the BTF
+//               once); exact, one after the other, each a DfmfChannelSource over the same
+//               chunks (three times the passes);
 //   svd=exact   the two-pass Gram method (streaming_exact_svd) when its rows x rows Gram matrix
 //               and the solver's workspace fit the limit, else an error naming the sizes;
 //   svd=auto    exact when rows <= 1024 (in core: min(rows, texels) <= 1024; only the rows side
@@ -39,8 +41,9 @@ struct StreamPlan {
   uint64_t rows = 0;         // rows of each factorized matrix: abrdf_size, or num_images (dfmf)
   uint64_t l = 0;            // randomized sketch width: max rank + oversample, <= min(rows, texels)
   int kept_blocks = 1;       // randomized: Krylov blocks of l held at once (streaming_svd's kept_blocks)
-  int passes = 0;            // passes over the chunks in all (x 3 for dfmf)
+  int passes = 0;            // passes over the chunks in all (exact dfmf: x 3)
   uint64_t fixed_bytes = 0;  // memory besides the chunk buffers (Gram or sketch, SxV, finished blocks)
+  uint64_t bytes_per_value = k_stream_bytes_per_value;  // of a chunk: its buffers (+ 4 for dfmf's split parts)
   std::string note;          // set when svd=auto or randomized resolved differently than in core
 };
 // Checks the spec streams within max_bytes (svd=exact whose Gram matrix does not fit is an

@@ -89,15 +89,24 @@ Status PassRunner::pass(size_t payload, const std::function<void(size_t, const f
 }
 
 Status PassRunner::finish(SvdResult& r, MatrixXfR& sxv, StreamStats* stats_out) {
+  BTFC_RETURN_IF_ERROR(gather(r, sxv));
+  done(stats_out);
+  return {};
+}
+
+Status PassRunner::gather(SvdResult& r, MatrixXfR& sxv) {
   const auto r0 = Clock::now();
   Status s = m_coll.reduce_sum_to_root(sxv.data(), size_t(sxv.size()));
   m_st.reduce_seconds += since(r0);
   m_st.reduce_bytes += uint64_t(sxv.size()) * 4;
   BTFC_RETURN_IF_ERROR(s);
   if (m_coll.rank() == 0) r.SxV = std::move(sxv);
+  return {};
+}
+
+void PassRunner::done(StreamStats* stats_out) {
   if (m_progress) m_progress->finish();
   if (stats_out) *stats_out = std::move(m_st);
-  return {};
 }
 
 void PassRunner::release() {

@@ -41,6 +41,10 @@ class PassRunner {
   // process 0 (disjoint rows: exact; timed and counted in the stats) and moved into r.SxV there,
   // the progress finished, the stats handed to stats_out (may be null).
   Status finish(SvdResult& r, MatrixXfR& sxv, StreamStats* stats_out);
+  // finish() in two steps, for several factorizations from one stream (streaming_svds): gather()
+  // once per result, then done() once.
+  Status gather(SvdResult& r, MatrixXfR& sxv);
+  void done(StreamStats* stats_out);
 
  private:
   struct Buffers {

@@ -15,142 +15,264 @@ using Eigen::Index;
 using Eigen::MatrixXd;
 using Eigen::MatrixXf;
 
-// acc += Y (double += float), in parallel over columns: with the CLI's chunks (~3300 texels at
-// UBO2003 size) a serial m x l add per chunk took a tenth of a pass. Element-wise: the result
-// does not depend on the thread count.
-static void add_into(Eigen::Map<MatrixXd> acc, const MatrixXf& Y) {
-#pragma omp parallel for schedule(static)
-  for (Index j = 0; j < Y.cols(); ++j) acc.col(j) += Y.col(j).cast<double>();
-}
+namespace {
 
-Result<SvdResult> streaming_svd(const ChunkSource& src, const std::vector<size_t>& chunks, const SvdOptions& opt, Collective& coll,
-                                StreamStats* stats_out, int kept_blocks) {
-  const size_t m = src.rows(), n = src.texels();
+// One factorization's block Krylov iteration (ooc_svd.h), driven pass by pass by the stream
+// loop below: begin() before a pass, slice() on every part of every owned chunk, end_chunk()
+// after a chunk, pack() / end() after the pass. Several run side by side in streaming_svds.
+class Krylov {
+ public:
+  enum class Phase { sketch, power, project, done };
+
+  Krylov(size_t m, size_t n, size_t num_chunks, const SvdOptions& opt, int kept_blocks)
+      : m_m(m), m_opt(opt), m_l(Index(std::min<size_t>(std::min(m, n), size_t(opt.max_rank) + size_t(opt.oversample)))), m_wt(num_chunks) {
+    m_max_blocks = int(std::max<Index>(1, std::min<Index>(opt.power_iters + 1, std::min<Index>(Index(m), Index(n)) / m_l)));
+    m_kept = kept_blocks > 0 ? std::min(kept_blocks, m_max_blocks) : m_max_blocks;
+    m_width = Index(m_kept) * m_l;
+    m_sketch = make_row_sketch(m, m_l, opt);
+  }
+  int max_passes() const { return m_max_blocks + 1; }  // at most: the error-driven stop may end earlier
+  Phase phase() const { return m_phase; }
+  // Doubles this pass sums over the processes: Y (m x l; the first pass adds ||B||_F^2), or G.
+  size_t payload() const {
+    return m_phase == Phase::project ? size_t(m_w * m_w) : m_m * size_t(m_l) + (m_phase == Phase::sketch ? 1 : 0);
+  }
+
+  void begin() {
+    if (m_phase == Phase::power) m_q = m_P.middleCols(Index(m_in_p - 1) * m_l, m_l).cast<float>();
+    if (m_phase == Phase::project) {
+      m_w = Index(m_in_p) * m_l;
+      m_q = m_P.middleCols(m_w - m_l, m_l).cast<float>();
+      m_G = MatrixXd::Zero(m_w, m_w);
+    }
+  }
+
+  // Columns [o, o + k) of owned chunk c (count texels in all), B: m x k. Every pass sums its
+  // m x l block straight into `sums` (zeroed before the chunks, ooc_pass.h): no second m x l
+  // copy in double.
+  void slice(size_t c, size_t count, size_t o, const float* B, size_t k, double* sums) {
+    auto acc = Eigen::Map<MatrixXd>(sums, Index(m_m), m_l);
+    switch (m_phase) {
+      case Phase::sketch:  // Y = B (B^T Omega): B^T Omega through the sparse sign sketch ~ a read
+        m_z.resize(Index(k), m_l);
+        row_sketch_product(B, k, m_sketch, m_z, &m_energy);
+        thin_product(B, m_m, k, m_z, m_y);
+        add_into(acc, m_y);
+        break;
+      case Phase::power: {  // Y = B B^T Q_b; Z = B^T Q_b is block b of W^T, kept
+        auto Z = wt_block(c, count, Index(m_in_p - 1) * m_l).middleRows(Index(o), Index(k));
+        transposed_product(B, m_m, k, m_q, Z);
+        thin_product(B, m_m, k, Z, m_y);
+        add_into(acc, m_y);
+        break;
+      }
+      case Phase::project: {  // the newest block's B^T Q completes W^T
+        auto Z = wt_block(c, count, m_w - m_l).middleRows(Index(o), Index(k));
+        transposed_product(B, m_m, k, m_q, Z);
+        break;
+      }
+      case Phase::done:
+        break;
+    }
+  }
+  void end_chunk(size_t c) {
+    if (m_phase != Phase::project) return;
+    const auto W = m_wt[c].leftCols(m_w);
+    m_G += (W.transpose() * W).cast<double>();
+  }
+  void pack(double* sums) const {
+    if (m_phase == Phase::sketch) sums[m_m * size_t(m_l)] = m_energy;
+    if (m_phase == Phase::project) std::copy(m_G.data(), m_G.data() + m_G.size(), sums);
+  }
+
+  // After the pass, with the global sums.
+  void end(const double* sums) {
+    const auto Y = Eigen::Map<const MatrixXd>(sums, Index(m_m), m_l);
+    if (m_phase == Phase::sketch) {
+      m_energy = sums[m_m * size_t(m_l)];
+      m_sketch = RowSketch{};
+      m_P.resize(Index(m_m), m_width);
+      m_P.leftCols(m_l) = Y;
+      orthonormalize_against(m_P, 0, m_P.leftCols(m_l));
+      m_blocks = m_in_p = 1;
+      m_K = MatrixXd::Zero(m_width, m_width);
+      m_phase = m_blocks < m_max_blocks ? Phase::power : Phase::project;
+      return;
+    }
+    if (m_phase == Phase::project) {
+      m_G = Eigen::Map<const MatrixXd>(sums, m_w, m_w);
+      m_phase = Phase::done;
+      return;
+    }
+    // A power pass: the error of the basis so far from its Gram matrix P^T B B^T P, whose last
+    // block column is P^T Y (no extra pass).
+    const Index used = Index(m_in_p - 1) * m_l, w = used + m_l;
+    m_K.block(0, used, w, m_l).noalias() = m_P.leftCols(w).transpose() * Y;
+    m_K.block(used, 0, m_l, used) = m_K.block(0, used, used, m_l).transpose();
+    // The in-core stop (svd.cpp): a block that gained at most k_krylov_stop of the error ends
+    // the iteration. The next block, orth(Y), costs no pass and still joins the basis.
+    const bool full = m_in_p == m_kept;
+    Eigen::SelfAdjointEigenSolver<MatrixXd> es(m_K.topLeftCorner(w, w), full ? Eigen::ComputeEigenvectors : Eigen::EigenvaluesOnly);
+    const double got = es.eigenvalues().tail(std::min<Index>(m_opt.max_rank, w)).cwiseMax(0.0).sum();
+    const double err = m_energy > 0 ? std::sqrt(std::max(0.0, m_energy - got) / m_energy) : 0;
+    const bool stop = m_blocks >= 2 && m_last_err - err <= k_krylov_stop * err;
+    m_last_err = err;
+    if (full) {
+      // The basis is full: restart from the best r = (kept - 1) l directions of span(P), its
+      // Ritz vectors P E (a thick restart; dropping the oldest block instead would drop the
+      // dominant directions, which the later blocks are orthogonal to). Their Gram matrix is
+      // diagonal.
+      const Index r = m_width - m_l;
+      const MatrixXd E = es.eigenvectors().rightCols(r);
+      for (Index i = 0; i < Index(m_m); i += 1024) {
+        const Index h = std::min<Index>(1024, Index(m_m) - i);
+        const MatrixXd rows = m_P.middleRows(i, h) * E;
+        m_P.block(i, 0, h, r) = rows;
+      }
+      const MatrixXf Ef = E.cast<float>();
+      for (MatrixXf& wt : m_wt)
+        if (wt.size()) wt.leftCols(r) = (wt * Ef).eval();  // B^T (P E) = (B^T P) E
+      m_K.topLeftCorner(r, r) = es.eigenvalues().tail(r).asDiagonal();
+      --m_in_p;
+    }
+    const Index at = Index(m_in_p) * m_l;
+    m_P.middleCols(at, m_l) = Y;
+    orthonormalize_against(m_P, at, m_P.middleCols(at, m_l));
+    ++m_blocks, ++m_in_p;
+    if (stop || m_blocks >= m_max_blocks) m_phase = Phase::project, m_K.resize(0, 0);
+  }
+
+  // The result once done: U on every process, this process's rows of SxV (zero elsewhere).
+  SvdResult result(const ChunkSource& src, const std::vector<size_t>& chunks, MatrixXfR& sxv) {
+    MatrixXd E;
+    SvdResult r = spectrum_of(m_G, m_w, m_energy, m_opt, "randomized (streamed)", E);
+    r.iterations = m_blocks;
+    const Index rank = r.S.size();
+    const MatrixXd Ek = E.leftCols(rank);
+    r.U = (m_P.leftCols(m_w) * Ek).cast<float>();
+    m_P.resize(0, 0);
+    sxv = MatrixXfR::Zero(Index(src.texels()), rank);
+    const MatrixXf Ekf = Ek.cast<float>();
+    for (size_t c : chunks) sxv.middleRows(Index(src.chunk_first(c)), m_wt[c].rows()) = m_wt[c].leftCols(m_w) * Ekf;
+    m_wt.clear();
+    return r;
+  }
+
+ private:
+  // acc += Y (double += float), in parallel over columns: with the CLI's chunks (~3300 texels at
+  // UBO2003 size) a serial m x l add per chunk took a tenth of a pass. Element-wise: the result
+  // does not depend on the thread count.
+  static void add_into(Eigen::Map<MatrixXd> acc, const MatrixXf& Y) {
+#pragma omp parallel for schedule(static)
+    for (Index j = 0; j < Y.cols(); ++j) acc.col(j) += Y.col(j).cast<double>();
+  }
+  // W^T = B^T P of the owned chunks (count x width each), filled block by block: pass b's first
+  // product Z = B_c^T Q_b is its block column, so the last pass only adds the newest block's.
+  Eigen::Block<MatrixXf, Eigen::Dynamic, Eigen::Dynamic, true> wt_block(size_t c, size_t count, Index at) {
+    if (m_wt[c].rows() != Index(count)) m_wt[c].resize(Index(count), m_width);
+    return m_wt[c].middleCols(at, m_l);
+  }
+
+  size_t m_m;
+  SvdOptions m_opt;
+  Index m_l, m_width = 0, m_w = 0;
+  int m_max_blocks = 1, m_kept = 1, m_blocks = 0, m_in_p = 0;
+  Phase m_phase = Phase::sketch;
+  RowSketch m_sketch;
+  double m_energy = 0, m_last_err = -1;
+  MatrixXd m_P, m_K, m_G;  // the basis (m x kept l), its Gram matrix P^T B B^T P, W W^T
+  MatrixXf m_q, m_z, m_y;
+  std::vector<MatrixXf> m_wt;
+};
+
+// Texels of a split part: ~8 M values per channel (32 MB) or the chunk, if smaller. Smaller parts
+// stay nearer the cache, but every product call stages its m x l operand: at UBO2003 size a
+// randomized dfmf encode took 9.0 s with 2 M, 7.1 s with 8 M and 7.5 s with 32 M values.
+constexpr size_t k_split_values = size_t(8) << 20;
+
+size_t part_texels(size_t rows, size_t max_count) { return std::max<size_t>(1, std::min(max_count, k_split_values / std::max<size_t>(1, rows))); }
+
+}  // namespace
+
+Result<std::vector<SvdResult>> streaming_svds(const ChunkSource& src, const std::vector<size_t>& chunks, const ChunkSplit* split,
+                                              const std::vector<SvdOptions>& opts, Collective& coll, StreamStats* stats_out,
+                                              int kept_blocks) {
+  const size_t m = split ? split->rows : src.rows(), n = src.texels();
+  const size_t channels = split ? size_t(split->channels) : 1;
   if (m == 0 || n == 0) return invalid_argument("SVD of an empty matrix");
-  if (opt.max_rank < 1) return invalid_argument("SVD rank must be >= 1");
-  const Index l = Index(std::min<size_t>(std::min(m, n), size_t(opt.max_rank) + size_t(opt.oversample)));
+  if (opts.size() != channels)
+    return invalid_argument("streamed SVD: " + std::to_string(opts.size()) + " option sets for " + std::to_string(channels) + " matrices");
+  for (const SvdOptions& o : opts)
+    if (o.max_rank < 1) return invalid_argument("SVD rank must be >= 1");
   // The passes run btfc's OpenMP kernels; the small BLAS products between and within them (the
   // orthonormalisation, W^T W per chunk) would leave OpenBLAS's own threads spinning against
   // them for the 2 cores: 2.5-2.8 s instead of 2.2-2.3 s at rank 32, q 1, UBO2003 size.
   SingleThreadedBlas serial_blas;
-  // Block Krylov on the rows side: blocks Q_1 = orth(B B^T Omega), Q_{b+1} = orth(B B^T Q_b) against
-  // the kept ones, in P (m x kept l, double); at most q + 1 blocks, as in core. When fewer may be
-  // kept (memory), a full P restarts from its Ritz vectors (below; kept 1: the power iteration).
-  const int max_blocks = int(std::max<Index>(1, std::min<Index>(opt.power_iters + 1, std::min<Index>(Index(m), Index(n)) / l)));
-  const int kept = kept_blocks > 0 ? std::min(kept_blocks, max_blocks) : max_blocks;
-  const Index width = Index(kept) * l;
-  const int total_passes = max_blocks + 1;  // at most: the error-driven stop may end earlier
-  PassRunner run(src, chunks, coll, opt.progress, "fmf out-of-core SVD", total_passes);
-  std::vector<double>& buf = run.sums();
-
-  // Every pass sums its m x l block straight into the allreduce buffer (zeroed before the chunks,
-  // ooc_pass.h): no second m x l copy in double.
-  auto sum_of = [&]() { return Eigen::Map<MatrixXd>(buf.data(), Index(m), l); };
-  // Pass 0: Y = B (B^T Omega), Omega on the rows as in core (svd.h, make_row_sketch: a sparse
-  // sign sketch, so B^T Omega costs ~ a read of the chunk), and ||B||_F^2.
-  double energy = 0;
-  {
-    const RowSketch sketch = make_row_sketch(m, l, opt);
-    MatrixXf Z, Yf;
-    auto sketch_pass = [&](size_t, const float* Bp, size_t k) {
-      Z.resize(Index(k), l);
-      row_sketch_product(Bp, k, sketch, Z, &energy);
-      thin_product(Bp, m, k, Z, Yf);
-      add_into(sum_of(), Yf);
-    };
-    BTFC_RETURN_IF_ERROR(run.pass(m * size_t(l) + 1, sketch_pass, [&](double* d) { d[m * size_t(l)] = energy; }));
-    energy = buf[m * size_t(l)];
+  std::vector<Krylov> ks;
+  int total_passes = 0;
+  for (const SvdOptions& o : opts) {
+    ks.emplace_back(m, n, src.num_chunks(), o, kept_blocks);
+    total_passes = std::max(total_passes, ks.back().max_passes());
   }
-  BTFC_RETURN_IF_ERROR(src.finish_first_pass(coll));
-  MatrixXd P(Index(m), width);
-  P.leftCols(l) = sum_of();
-  orthonormalize_against(P, 0, P.leftCols(l));
-  int blocks = 1, in_p = 1;  // blocks made, blocks in P
-  // Passes 1..: Y = B B^T Q_b (one read, both products per chunk), then the error of the basis so
-  // far from its Gram matrix P^T B B^T P, whose last block column is P^T Y (no extra pass).
-  // W^T = B^T P of the owned chunks (n_c x width each), filled block by block: pass b's first
-  // product Z = B_c^T Q_b is its block column, so the last pass only adds the newest block's.
-  std::vector<MatrixXf> wt(src.num_chunks());
-  auto wt_block = [&](size_t c, size_t k, Index at) {
-    if (wt[c].rows() != Index(k)) wt[c].resize(Index(k), width);
-    return wt[c].middleCols(at, l);
-  };
-  MatrixXd K = MatrixXd::Zero(width, width);
-  double last_err = -1;
-  while (blocks < max_blocks) {
-    const Index used = Index(in_p - 1) * l, w = used + l;
-    const MatrixXf Q = P.middleCols(used, l).cast<float>();
-    MatrixXf Yf;
-    auto power = [&](size_t c, const float* Bp, size_t k) {
-      auto Z = wt_block(c, k, used);
-      transposed_product(Bp, m, k, Q, Z);
-      thin_product(Bp, m, k, Z, Yf);
-      add_into(sum_of(), Yf);
-    };
-    BTFC_RETURN_IF_ERROR(run.pass(m * size_t(l), power, [](double*) {}));
-    const auto Y = sum_of();
-    K.block(0, used, w, l).noalias() = P.leftCols(w).transpose() * Y;
-    K.block(used, 0, l, used) = K.block(0, used, used, l).transpose();
-    // The in-core stop (svd.cpp): a block that gained at most k_krylov_stop of the error ends
-    // the iteration. The next block, orth(Y), costs no pass and still joins the basis.
-    const bool full = in_p == kept;
-    Eigen::SelfAdjointEigenSolver<MatrixXd> es(K.topLeftCorner(w, w), full ? Eigen::ComputeEigenvectors : Eigen::EigenvaluesOnly);
-    const double got = es.eigenvalues().tail(std::min<Index>(opt.max_rank, w)).cwiseMax(0.0).sum();
-    const double err = energy > 0 ? std::sqrt(std::max(0.0, energy - got) / energy) : 0;
-    const bool stop = blocks >= 2 && last_err - err <= k_krylov_stop * err;
-    last_err = err;
-    if (full) {
-      // The window is full: restart from the best r = (kept - 1) l directions of span(P), its Ritz
-      // vectors P E (a thick restart; dropping the oldest block instead would drop the dominant
-      // directions, which the later blocks are orthogonal to). Their Gram matrix is diagonal.
-      const Index r = width - l;
-      const MatrixXd E = es.eigenvectors().rightCols(r);
-      for (Index i = 0; i < Index(m); i += 1024) {
-        const Index h = std::min<Index>(1024, Index(m) - i);
-        const MatrixXd rows = P.middleRows(i, h) * E;
-        P.block(i, 0, h, r) = rows;
+  PassRunner run(src, chunks, coll, opts[0].progress, "fmf out-of-core SVD", total_passes);
+  size_t part = 0;  // texels per split part
+  std::vector<float> parts;
+  if (split) {
+    size_t max_count = 0;
+    for (size_t c : chunks) max_count = std::max(max_count, src.chunk_count(c));
+    part = part_texels(m, max_count);
+    parts.resize(channels * m * part);
+  }
+  std::vector<float*> outs(channels);
+  for (bool first = true;; first = false) {
+    std::vector<size_t> active, off;
+    size_t payload = 0;
+    for (size_t i = 0; i < ks.size(); ++i)
+      if (ks[i].phase() != Krylov::Phase::done) {
+        ks[i].begin();
+        active.push_back(i), off.push_back(payload);
+        payload += ks[i].payload();
       }
-      for (size_t c : chunks) wt[c].leftCols(r) = (wt[c] * E.cast<float>()).eval();  // B^T (P E) = (B^T P) E
-      K.topLeftCorner(r, r) = es.eigenvalues().tail(r).asDiagonal();
-      --in_p;
-    }
-    const Index at = Index(in_p) * l;
-    P.middleCols(at, l) = Y;
-    orthonormalize_against(P, at, P.middleCols(at, l));
-    ++blocks, ++in_p;
-    if (stop) break;
-  }
-  K.resize(0, 0);
-  const Index w = Index(in_p) * l;
-  // Last pass: the newest block's columns of W^T = B^T P, and W W^T (w x w).
-  MatrixXd G = MatrixXd::Zero(w, w);
-  {
-    const Index at = w - l;
-    const MatrixXf Q = P.middleCols(at, l).cast<float>();
-    auto project = [&](size_t c, const float* Bp, size_t k) {
-      auto Z = wt_block(c, k, at);
-      transposed_product(Bp, m, k, Q, Z);
-      const auto W = wt[c].leftCols(w);
-      G += (W.transpose() * W).cast<double>();
+    if (active.empty()) break;
+    auto fn = [&](size_t c, const float* B, size_t k) {
+      double* sums = run.sums().data();
+      if (!split) {
+        for (size_t a = 0; a < active.size(); ++a) ks[active[a]].slice(c, k, 0, B, k, sums + off[a]);
+      } else {
+        // Split a part, then every unfinished channel's products on it while it is near the cache.
+        for (size_t o = 0; o < k; o += part) {
+          const size_t h = std::min(part, k - o);
+          for (size_t i = 0; i < channels; ++i) outs[i] = parts.data() + i * m * h;
+          split->split(c, o, B + o * src.rows(), h, outs.data());
+          for (size_t a = 0; a < active.size(); ++a) ks[active[a]].slice(c, k, o, outs[active[a]], h, sums + off[a]);
+        }
+      }
+      for (size_t i : active) ks[i].end_chunk(c);
     };
-    BTFC_RETURN_IF_ERROR(run.pass(size_t(w * w), project, [&](double* d) { std::copy(G.data(), G.data() + G.size(), d); }));
+    auto pack = [&](double* d) {
+      for (size_t a = 0; a < active.size(); ++a) ks[active[a]].pack(d + off[a]);
+    };
+    BTFC_RETURN_IF_ERROR(run.pass(payload, fn, pack));
+    for (size_t a = 0; a < active.size(); ++a) ks[active[a]].end(run.sums().data() + off[a]);
+    if (first) BTFC_RETURN_IF_ERROR(src.finish_first_pass(coll));
   }
-  G = Eigen::Map<MatrixXd>(buf.data(), w, w);
   run.release();
+  std::vector<float>().swap(parts);
+  std::vector<SvdResult> rs;
+  for (Krylov& k : ks) {
+    MatrixXfR sxv;
+    SvdResult r = k.result(src, chunks, sxv);
+    BTFC_RETURN_IF_ERROR(run.gather(r, sxv));
+    rs.push_back(std::move(r));
+  }
+  run.done(stats_out);
+  return rs;
+}
 
-  MatrixXd E;
-  SvdResult r = spectrum_of(G, w, energy, opt, "randomized (streamed)", E);
-  r.iterations = blocks;
-  const Index rank = r.S.size();
-  const MatrixXd Ek = E.leftCols(rank);
-  r.U = (P.leftCols(w) * Ek).cast<float>();
-  // SxV rows of the owned texels, summed (disjoint rows: exact) into process 0.
-  MatrixXfR sxv = MatrixXfR::Zero(Index(n), rank);
-  const MatrixXf Ekf = Ek.cast<float>();
-  for (size_t c : chunks) sxv.middleRows(Index(src.chunk_first(c)), wt[c].rows()) = wt[c].leftCols(w) * Ekf;
-  wt.clear();
-  BTFC_RETURN_IF_ERROR(run.finish(r, sxv, stats_out));
-  return r;
+Result<SvdResult> streaming_svd(const ChunkSource& src, const std::vector<size_t>& chunks, const SvdOptions& opt, Collective& coll,
+                                StreamStats* stats_out, int kept_blocks) {
+  BTFC_ASSIGN_OR_RETURN(std::vector<SvdResult> rs, streaming_svds(src, chunks, nullptr, {opt}, coll, stats_out, kept_blocks));
+  return std::move(rs[0]);
 }
 
 }  // namespace btfc::fmf

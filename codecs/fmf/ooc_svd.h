@@ -43,6 +43,7 @@
 // caller sizes chunks so this stays under its limit (ooc_fmf.h).
 #pragma once
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -60,6 +61,26 @@ namespace btfc::fmf {
 // than q + 1, P restarts from its Ritz vectors when full (above), 1 being the power iterations.
 Result<SvdResult> streaming_svd(const ChunkSource& src, const std::vector<size_t>& chunks, const SvdOptions& opt, Collective& coll,
                                 StreamStats* stats = nullptr, int kept_blocks = 0);
+
+// Several matrices from one stream, e.g. color=dfmf's three channel matrices (ooc_dfmf.h): split
+// turns a part of a chunk (the source's rows x count floats, column-major; `offset` texels into
+// chunk c) into `channels` matrices of `rows` rows (rows x count each), written to out[0..).
+// Called on the thread that runs the products, one part at a time, parts in order.
+struct ChunkSplit {
+  int channels = 1;
+  size_t rows = 0;
+  std::function<void(size_t c, size_t offset, const float* B, size_t count, float* const* out)> split;
+};
+
+// streaming_svd of each of split's matrices (opts[i] for matrix i), all in one stream: every
+// pass reads each owned chunk once, splits it in parts of ~8 M values per matrix and runs every
+// unfinished factorization's products on each part. Each result is streaming_svd's on that
+// matrix (its own error-driven stop; the stream ends with the last). The parts take at most a
+// chunk's values in floats besides streaming_svd's memory for each matrix. With split null, the
+// source itself is the one matrix (streaming_svd).
+Result<std::vector<SvdResult>> streaming_svds(const ChunkSource& src, const std::vector<size_t>& chunks, const ChunkSplit* split,
+                                              const std::vector<SvdOptions>& opts, Collective& coll, StreamStats* stats = nullptr,
+                                              int kept_blocks = 0);
 
 // The same contract, exactly (the top singular triplets up to double round-off, as truncated_svd
 // with SvdMethod::exact when m <= n) in 2 passes; opt.method, oversample, power_iters and seed
