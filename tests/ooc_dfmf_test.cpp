@@ -72,6 +72,18 @@ TEST(StreamingDfmf, MatchesInCoreDfmfFromCopiedAndMappedChunks) {
   ASSERT_TRUE(in_core.ok()) << in_core.status().message();
   const double e_in = model_error(b, *in_core.value());
   EXPECT_GT(e_in, 0.002);  // not exact at these ranks: the comparison means something
+  // In core, randomized dfmf runs the one-stream path too (over the Btf's memory): each channel
+  // within 1 % of its Eckart-Young optimum, the exact SVD's error at the same rank.
+  auto exact_spec = resolve_spec("fmf:color=dfmf:rank=10:chroma_rank=6:svd=exact");
+  ASSERT_TRUE(exact_spec.ok());
+  auto exact = exact_spec->first->encode(b, exact_spec->second, ctx);
+  ASSERT_TRUE(exact.ok()) << exact.status().message();
+  for (const char* ch : {"y", "u", "v"}) {
+    const double got = stat(*in_core.value(), std::string("rel_error.") + ch), best = stat(*exact.value(), std::string("rel_error.") + ch);
+    EXPECT_GT(best, 0.001) << ch;
+    EXPECT_GE(got, best * (1 - 1e-4)) << ch;  // estimates from energies: equal up to rounding at best
+    EXPECT_LE(got, best * 1.01) << ch;
+  }
   for (bool mapped : {false, true}) {
     MemorySource src(b, 50);  // 8 chunks, the last one short
     src.mapped = mapped;
