@@ -13,7 +13,9 @@
 //             [--load FILE [--rows 19683] [--texels N]]  (factorize a --dump file, or its first N
 //             texels, instead of synthesizing)
 //             [--scheme krylov|power] [--svd-only]  (randomized scheme; skip the codec run)
-//             [--dump-only]  (with --dump: stop after writing the file)
+//             [--dump-only]  (with --dump or --dump-dfmf: stop after writing the files)
+//             [--dump-dfmf PREFIX]  (color=dfmf's three channel matrices, automatic offset, as
+//             PREFIX.y.f32, PREFIX.u.f32, PREFIX.v.f32: for bench/peer_sklearn_dfmf.sh)
 //             [--dense-start]  (krylov: a Gaussian first block instead of the sparse sign sketch)
 //             [--seed 1]  (the test matrix's seed)
 //             [--streamed K [--chunk N]]  (with --load: the out-of-core SVD, codecs/fmf/ooc_svd.h,
@@ -32,6 +34,7 @@
 
 #include "bench/bench_timing.h"
 #include "codecs/codec.h"
+#include "codecs/fmf/fmf.h"
 #include "codecs/fmf/ooc_svd.h"
 #include "core/svd.h"
 #include "core/cl_runtime.h"
@@ -56,7 +59,7 @@ int main(int argc, char** argv) {
   bool dense_start = false;
   uint64_t seed = 1;
   int streamed = -1, chunk = 0;
-  std::string dump, codec_spec, load;
+  std::string dump, dump_dfmf, codec_spec, load;
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
     auto next = [&] { return i + 1 < argc ? std::atoi(argv[++i]) : 0; };
@@ -67,6 +70,7 @@ int main(int argc, char** argv) {
     else if (a == "--oversample") over = next();
     else if (a == "--reference") reference = true;
     else if (a == "--dump" && i + 1 < argc) dump = argv[++i];
+    else if (a == "--dump-dfmf" && i + 1 < argc) dump_dfmf = argv[++i];
     else if (a == "--codec" && i + 1 < argc) codec_spec = argv[++i];
     else if (a == "--load" && i + 1 < argc) load = argv[++i];
     else if (a == "--rows") load_rows = size_t(next());
@@ -185,6 +189,27 @@ int main(int argc, char** argv) {
     std::fclose(f);
     std::printf("dumped %zu x %zu float32 matrix (column-major: rows = ABRDF, columns = texels) to %s\n", d.abrdf_size(),
                 d.num_texels(), dump.c_str());
+    if (dump_only && dump_dfmf.empty()) return 0;
+  }
+  if (!dump_dfmf.empty()) {
+    // The matrices the dfmf encode factorizes (fmf.cpp): the automatic offset, then each channel
+    // through dfmf_channel, texel by texel (num_images rows x texels, column-major).
+    const size_t rows = d.num_images(), n = d.num_texels();
+    double sy = 0, sy2 = 0;
+    for (size_t t = 0; t < n; ++t) dfmf_luminance_moments(btf->abrdf(t), rows, &sy, &sy2);
+    const float offset = float(dfmf_auto_offset(sy, sy2));
+    std::vector<float> col(rows);
+    for (int k = 0; k < 3; ++k) {
+      const std::string path = dump_dfmf + "." + "yuv"[k] + ".f32";
+      std::FILE* f = std::fopen(path.c_str(), "wb");
+      if (!f) return 2;
+      for (size_t t = 0; t < n; ++t) {
+        dfmf_channel(btf->abrdf(t), rows, k, offset, col.data());
+        if (std::fwrite(col.data(), 4, rows, f) != rows) return 2;
+      }
+      std::fclose(f);
+      std::printf("dumped %zu x %zu float32 dfmf channel %c (offset %.9g) to %s\n", rows, n, "yuv"[k], offset, path.c_str());
+    }
     if (dump_only) return 0;
   }
 
