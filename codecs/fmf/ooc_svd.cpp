@@ -214,7 +214,7 @@ Result<std::vector<SvdResult>> streaming_svds(const ChunkSource& src, const std:
     ks.emplace_back(m, n, src.num_chunks(), o, kept_blocks);
     total_passes = std::max(total_passes, ks.back().max_passes());
   }
-  PassRunner run(src, chunks, coll, opts[0].progress, "fmf out-of-core SVD", total_passes);
+  PassRunner run(src, chunks, coll, opts[0].progress, split ? "fmf streamed SVDs" : "fmf streamed SVD", total_passes);
   size_t part = 0;  // texels per split part
   std::vector<float> parts;
   if (split) {

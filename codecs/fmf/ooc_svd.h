@@ -2,8 +2,9 @@
 // read in column chunks, never held whole. Two algorithms, both ending every pass with one
 // collective sum (the pass machinery and its failure handling are shared: ooc_pass.h).
 //
-// Randomized (streaming_svd): randomized block Krylov (Musco and Musco 2015) on the rows side,
-// arranged so that every pass reads B exactly once and does at most two products per chunk:
+// Randomized (streaming_svd; streaming_svds runs several from one stream): randomized block
+// Krylov (Musco and Musco 2015) on the rows side, arranged so that every pass reads B exactly
+// once and does at most two products per chunk:
 //   pass 0        Y = B (B^T Omega), ||B||_F^2   (Omega on the rows, m x l, l = C + p: the in-core
 //                 path's first test matrix, svd.h make_row_sketch, a sparse sign sketch S times a
 //                 Gaussian, so B^T Omega costs ~ a read and the pass one GEMM); Q_1 = orth(Y)
