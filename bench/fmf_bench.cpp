@@ -112,21 +112,8 @@ int main(int argc, char** argv) {
   };
   // The streamed SVD over mapped in-memory chunks of `chunk` texels.
   auto run_streamed = [&](const float* B, size_t m, size_t n, double input_gb) {
-    struct Mapped final : ChunkSource {
-      const float* B;
-      size_t m, n, per;
-      size_t rows() const override { return m; }
-      size_t num_chunks() const override { return (n + per - 1) / per; }
-      size_t chunk_first(size_t c) const override { return c * per; }
-      size_t chunk_count(size_t c) const override { return std::min(per, n - c * per); }
-      size_t raw_bytes(size_t c) const override { return chunk_count(c) * m * 4; }
-      Status read(size_t c, void* raw) const override { return unsupported("mapped only"); }
-      Status decode(size_t c, const void* raw, float* dst) const override { return unsupported("mapped only"); }
-      bool mappable() const override { return true; }
-      Result<const float*> map(size_t c) const override { return B + chunk_first(c) * m; }
-    } src;
     const size_t lines = std::max<size_t>(1, (size_t(64) << 20) / (m * 256));
-    src.B = B, src.m = m, src.n = n, src.per = chunk > 0 ? size_t(chunk) : lines * 256;
+    const MatrixChunks src(B, m, n, chunk > 0 ? size_t(chunk) : lines * 256);
     SvdOptions opt;
     opt.max_rank = rank, opt.power_iters = power, opt.oversample = over, opt.seed = seed;
     Collective one;
@@ -140,7 +127,7 @@ int main(int argc, char** argv) {
     }
     const std::string variant = streamed == 0 ? "krylov" : "window" + std::to_string(streamed);
     std::printf("streamed   rank %d q %d p %d %s: %.2f s, rel L2 error %.6f, %d passes (%d blocks), chunks of %zu texels, peak RSS %.2f GB (%.2f x input)\n",
-                rank, power, over, variant.c_str(), secs, r->rel_error_estimate(), st.passes, r->iterations, src.per, peak_rss_gb(),
+                rank, power, over, variant.c_str(), secs, r->rel_error_estimate(), st.passes, r->iterations, src.chunk_count(0), peak_rss_gb(),
                 peak_rss_gb() / input_gb);
     std::printf("           pass seconds:");
     for (double p : st.pass_seconds) std::printf(" %.2f", p);

@@ -213,25 +213,6 @@ TEST(StreamingSvd, AWindowOfKrylovBlocksStillConverges) {
   }
 }
 
-// A column-major m x n float matrix as mapped chunks of `per` texels.
-class MatrixSource final : public ChunkSource {
- public:
-  MatrixSource(const std::vector<float>& b, size_t m, size_t per) : m_b(b), m_m(m), m_per(per) {}
-  size_t rows() const override { return m_m; }
-  size_t num_chunks() const override { return (m_b.size() / m_m + m_per - 1) / m_per; }
-  size_t chunk_first(size_t c) const override { return c * m_per; }
-  size_t chunk_count(size_t c) const override { return std::min(m_per, m_b.size() / m_m - c * m_per); }
-  size_t raw_bytes(size_t c) const override { return chunk_count(c) * m_m * 4; }
-  Status read(size_t, void*) const override { return unsupported("mapped only"); }
-  Status decode(size_t, const void*, float*) const override { return unsupported("mapped only"); }
-  bool mappable() const override { return true; }
-  Result<const float*> map(size_t c) const override { return m_b.data() + chunk_first(c) * m_m; }
-
- private:
-  const std::vector<float>& m_b;
-  size_t m_m, m_per;
-};
-
 // The streamed Krylov SVD (its first pass through the sparse sign sketch: 1200 rows >= 4 x 256
 // buckets) at the extremes, against the exact SVD: zeros, a constant, rank 2, HDR rows 1e-6..1e6;
 // with the whole basis and with one kept block (the power iteration).
@@ -257,7 +238,7 @@ TEST(StreamingSvd, HoldsAtTheExtremes) {
     o.max_rank = 8, o.oversample = 8, o.power_iters = 3, o.method = SvdMethod::exact;
     auto exact = truncated_svd(b.data(), m, n, o);
     ASSERT_TRUE(exact.ok()) << name;
-    MatrixSource src(b, m, 64);
+    const MatrixChunks src(b.data(), m, b.size() / m, 64);  // mapped chunks of 64 texels
     Collective one;
     for (int kept : {0, 1}) {
       auto r = fmf::streaming_svd(src, owned_chunks(src, 0, 1), o, one, nullptr, kept);
