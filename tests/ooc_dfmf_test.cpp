@@ -161,6 +161,51 @@ TEST(StreamingDfmf, VectorizedTransformIsTheDefinition) {
   EXPECT_TRUE(std::isnan(y[2]));
 }
 
+// The in-core one-stream path (randomized) at the extremes, against svd=exact on the same data:
+// all zeros (Y' constant, U' and V' zero matrices), a constant, and HDR texels 1e-6..1e6 on a
+// rank-2 pattern. The decoded BTF is finite and within 1 % (plus round-off) of the exact error.
+TEST(StreamingDfmf, InCoreOneStreamHoldsAtTheExtremes) {
+  const Btf base = synth(12, 10);  // 162 images x 120 texels: rank 4 + oversample 4 < 120 is randomized
+  std::vector<std::pair<const char*, Btf>> cases;
+  Btf zeros = base, constant = base, hdr = base;
+  std::fill(zeros.data(), zeros.data() + zeros.size(), 0.0f);
+  std::fill(constant.data(), constant.data() + constant.size(), 0.37f);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> ex(-6, 6), pat(0.5, 1.5);
+  std::vector<double> row(hdr.desc().abrdf_size());
+  for (double& r : row) r = pat(rng);
+  for (size_t t = 0; t < hdr.desc().num_texels(); ++t) {
+    const double s = std::pow(10.0, ex(rng));
+    for (size_t i = 0; i < row.size(); ++i) hdr.abrdf(t)[i] = float(s * row[i] * (t % 2 ? 1.0 : 0.5 + 0.5 * double(i % 3)));
+  }
+  cases.emplace_back("zeros", std::move(zeros));
+  cases.emplace_back("constant", std::move(constant));
+  cases.emplace_back("hdr", std::move(hdr));
+  Context ctx;
+  for (auto& [name, b] : cases) {
+    double err[2];
+    for (int exact = 0; exact < 2; ++exact) {
+      auto spec = resolve_spec(std::string("fmf:color=dfmf:rank=4:chroma_rank=2:oversample=4:power_iters=2:precision=float:svd=") +
+                               (exact ? "exact" : "randomized"));
+      ASSERT_TRUE(spec.ok());
+      auto m = spec->first->encode(b, spec->second, ctx);
+      ASSERT_TRUE(m.ok()) << name << ": " << m.status().message();
+      if (!exact) EXPECT_GE(stat(*m.value(), "krylov_blocks.y"), 1) << name << ": the one-stream path ran";
+      Btf out;
+      ASSERT_TRUE(m.value()->decode_all(out).ok());
+      for (size_t i = 0; i < out.size(); ++i) ASSERT_TRUE(std::isfinite(out.data()[i])) << name << " value " << i;
+      double sq = 0, ref = 0;
+      for (size_t i = 0; i < out.size(); ++i) {
+        const double d = double(out.data()[i]) - double(b.data()[i]);
+        sq += d * d, ref += double(b.data()[i]) * double(b.data()[i]);
+      }
+      err[exact] = std::sqrt(sq / std::max(ref, 1e-300));
+      if (std::string(name) == "zeros") EXPECT_LT(std::sqrt(sq / double(out.size())), 1e-6) << "zeros decode to ~0";
+    }
+    if (std::string(name) != "zeros") EXPECT_LE(err[0], err[1] * 1.01 + 1e-5) << name << ": randomized " << err[0] << ", exact " << err[1];
+  }
+}
+
 TEST(StreamingDfmf, ChannelChunksAreTheInCoreTransform) {
   const Btf b = noisy(6, 5);
   const size_t rows = b.desc().num_images();
