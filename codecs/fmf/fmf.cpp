@@ -76,7 +76,7 @@ Block block_from_svd(const std::string& name, SvdResult r, bool half, int max_ra
   stats.add("rank." + name, kept);
   stats.add("rel_error." + name, r.rel_error_estimate());
   stats.note("svd." + name, r.method);
-  if (r.iterations > 0) stats.add("krylov_blocks." + name, r.iterations);  // 2 passes over B each
+  if (r.iterations > 0) stats.add("krylov_blocks." + name, r.iterations);  // passes: in core 2 each, streamed 1 each + 1
   if (kept < max_rank && target == 0)
     stats.note("clamped." + name, "rank " + std::to_string(max_rank) + " clamped to " + std::to_string(kept) +
                                       " (the data's numerical rank limit is " + std::to_string(r.data_rank_limit) + ")");
@@ -194,9 +194,9 @@ class FmfCodec final : public Codec {
         for (int k = 0; k < 3; ++k) blocks.push_back(block_from_svd(names[k], std::move(rs[k]), cfg.half, ranks[k], 0, stats));
         clamped = size_t(cl);
       } else {
-        // One decorrelated channel matrix at a time keeps peak memory at input + 1/3 input (the
-        // exact path: small direction sets). Not a zero-filled vector: every value is written
-        // below, and zeroing through 4 KiB page faults is slow (huge pages here).
+        // Exact (small direction sets): one decorrelated channel matrix at a time, peak memory
+        // input + 1/3 input. A PageBuffer (huge pages requested, not zeroed): every value is
+        // written below, and zero-filling through 4 KiB page faults was most of the encode.
         PageBuffer<float> ch(rows * n);
         for (int k = 0; k < 3; ++k) {
 #pragma omp parallel for reduction(+ : clamped) schedule(static)
