@@ -24,29 +24,8 @@
 #   The channel files go to WORKDIR (default BUILD/peer-sklearn; 5.2 GB) and are removed at the
 #   end unless --keep (an existing set is reused). Needs python3-sklearn (scripts/setup.sh).
 set -euo pipefail
-BUILD=build
-WORKDIR=""
-RANKS="16 32 64"
-REPEAT=2
-KEEP=0
-while [ $# -gt 0 ]; do
-  case "$1" in
-    --build) BUILD=$2; shift 2 ;;
-    --workdir) WORKDIR=$2; shift 2 ;;
-    --ranks) RANKS=$2; shift 2 ;;
-    --repeat) REPEAT=$2; shift 2 ;;
-    --keep) KEEP=1; shift ;;
-    *) echo "unknown argument $1" >&2; exit 1 ;;
-  esac
-done
-BENCH="$BUILD/bench/bench_fmf"
-WORKDIR=${WORKDIR:-$BUILD/peer-sklearn}
-[ -x "$BENCH" ] || { echo "no $BENCH (build first)" >&2; exit 1; }
-PY=""
-for p in /usr/bin/python3 $(command -v python3 || true); do
-  if "$p" -c "import sklearn" 2>/dev/null; then PY=$p; break; fi
-done
-[ -n "$PY" ] || { echo "python3-sklearn missing: run scripts/setup.sh" >&2; exit 1; }
+. "$(dirname "$0")/peer_common.sh"
+[ -z "$MATRIX" ] || { echo "--matrix: this script dumps its own channel matrices (see --workdir, --keep)" >&2; exit 1; }
 mkdir -p "$WORKDIR"
 PREFIX="$WORKDIR/dfmf"
 DUMPED=0
@@ -56,7 +35,6 @@ if [ ! -f "$PREFIX.v.f32" ]; then
 fi
 cleanup() { if [ "$DUMPED" = 1 ] && [ "$KEEP" = 0 ]; then rm -f "$PREFIX".[yuv].f32; fi; }
 trap cleanup EXIT
-if grep -q avx512vl /proc/cpuinfo && [ -z "${OPENBLAS_CORETYPE:-}" ]; then export OPENBLAS_CORETYPE=SkylakeX; fi
 
 # "sklearn rank R q Q NORM: T s, errors Ey Eu Ev, peak RSS X x input"
 sk() {
