@@ -552,6 +552,26 @@ DirWeights DirectionInterpolator::weights(const Vec3& dir) const {
   return make_weights(t.index, {cross(t.b, t.c, p), cross(t.c, t.a, p), cross(t.a, t.b, p)});
 }
 
+void DirectionInterpolator::weights_batch(const Vec3* dir, size_t n, DirWeights* out) const {
+  const FineTable& ft = fine();
+  constexpr size_t G = 32;  // queries in flight: enough misses to overlap, all in L1
+  Vec2 p[G];
+  int c[G];
+  for (size_t i0 = 0; i0 < n; i0 += G) {
+    const size_t m = std::min(G, n - i0);
+    for (size_t k = 0; k < m; ++k) p[k] = to_parabolic(dir[i0 + k]);
+    for (size_t k = 0; k < m; ++k) c[k] = table_entry(ft, p[k]);
+    for (size_t k = 0; k < m; ++k) {
+      if (c[k] < 0) {
+        out[i0 + k] = table_miss(ft, p[k], c[k]);
+        continue;
+      }
+      const CornerTri& t = ft.corner_tris[size_t(c[k])];  // as weights()
+      out[i0 + k] = make_weights(t.index, {cross(t.b, t.c, p[k]), cross(t.c, t.a, p[k]), cross(t.a, t.b, p[k])});
+    }
+  }
+}
+
 [[gnu::noinline]] DirWeights DirectionInterpolator::table_miss(const FineTable& ft, const Vec2& p, int c) const {
   if (c <= k_multi_base) {
     // Candidates in the search's order: the first that accepts p is what the search returns; if

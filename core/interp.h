@@ -43,6 +43,10 @@ class DirectionInterpolator {
   // Fast: most queries are answered from a fine lookup table (one load and one barycentric
   // evaluation); the rest take weights_reference(). Thread-safe (const, no caches).
   DirWeights weights(const Vec3& dir) const;
+  // weights(dir[i]) for i < n, the same bits; for many queries at once (a renderer's or a
+  // benchmark's batch). A group's table cells are all located before any is read, so their
+  // cache misses overlap instead of forming one chain of dependent loads per query.
+  void weights_batch(const Vec3* dir, size_t n, DirWeights* out) const;
   // The simple search (coarse grid of candidate triangles, then nearest hull edge), kept as the
   // definition of the result and to test the fast path against: same output for every input.
   DirWeights weights_reference(const Vec3& dir) const;

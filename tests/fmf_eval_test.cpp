@@ -105,6 +105,27 @@ TEST(FmfEval, EveryKernelShapeMatchesTheReference) {
     }
 }
 
+TEST(FmfEval, EveryBlendKernelThisCpuRunsMatchesTheReference) {
+  // The AVX2 kernel (CPUs without AVX-512 take it) and the generic loop, forced, on the shapes
+  // the register kernels take; the test above runs the best kernel of whatever CPU runs it.
+  const DirectionSet L = first(DirectionSet::ubo2003(), 31), V = first(DirectionSet::ubo2003(), 13);
+  int ran = 0;
+  for (fmf::EvalPath path : {fmf::EvalPath::avx2, fmf::EvalPath::generic}) {
+    if (!fmf::set_eval_path(path)) continue;
+    ++ran;
+    for (int channels : {3, 1})
+      for (int rank : {8, 16, 32, 48}) {
+        const BtfDesc d = desc(9, 7, channels, L, V);
+        auto m = encode(random_btf(d, unsigned(rank * channels)), "fmf:rank=" + std::to_string(rank));
+        ASSERT_TRUE(m);
+        expect_fast_equals_reference(*m, queries(d, 2000, unsigned(rank + 7)),
+                                     "path " + std::to_string(int(path)) + " channels " + std::to_string(channels) + " rank " + std::to_string(rank));
+      }
+  }
+  ASSERT_TRUE(fmf::set_eval_path(fmf::EvalPath::best));
+  EXPECT_GE(ran, 1);  // the generic loop runs everywhere
+}
+
 TEST(FmfEval, BatchesOverSeveralBlocksAndFullDirectionSets) {
   // More queries than fmf::k_eval_block (several sorted blocks, both threads), the 81 x 81 set.
   const BtfDesc d = desc(16, 16, 3, DirectionSet::ubo2003(), DirectionSet::ubo2003());

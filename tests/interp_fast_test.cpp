@@ -10,6 +10,7 @@
 #include <cstring>
 #include <limits>
 #include <random>
+#include <vector>
 
 namespace btfc {
 namespace {
@@ -30,6 +31,7 @@ class Checker {
   explicit Checker(const DirectionInterpolator& in) : m_in(in) {}
   void check(const Vec3& d) {
     const DirWeights a = m_in.weights(d), b = m_in.weights_reference(d);
+    m_dirs.push_back(d), m_fast_out.push_back(a);
     ++m_count;
     m_fast += m_in.fast_path_kind(d) != 0;
     if (std::memcmp(&a, &b, sizeof a) != 0 && m_fail++ < 5)
@@ -42,6 +44,16 @@ class Checker {
     for (int i = -ulps; i <= ulps; ++i)
       for (int j = -ulps; j <= ulps; ++j) check({step(d.x, i), step(d.y, j), d.z});
   }
+  // weights_batch() over every direction checked so far, in one call (groups, a ragged end):
+  // the same bits as weights() per direction.
+  void check_batch() {
+    std::vector<DirWeights> out(m_dirs.size());
+    m_in.weights_batch(m_dirs.data(), m_dirs.size(), out.data());
+    int fail = 0;
+    for (size_t i = 0; i < m_dirs.size(); ++i)
+      if (std::memcmp(&out[i], &m_fast_out[i], sizeof(DirWeights)) != 0 && fail++ < 5)
+        ADD_FAILURE() << "weights_batch differs from weights() at query " << i;
+  }
   size_t count() const { return m_count; }
   double fast_fraction() const { return double(m_fast) / double(m_count); }
 
@@ -52,6 +64,8 @@ class Checker {
     return v;
   }
   const DirectionInterpolator& m_in;
+  std::vector<Vec3> m_dirs;
+  std::vector<DirWeights> m_fast_out;
   size_t m_count = 0, m_fast = 0;
   int m_fail = 0;
 };
@@ -89,6 +103,7 @@ double check_set(const DirectionSet& s, uint32_t seed) {
   for (const Vec3& d : {Vec3{0, 0, 1}, Vec3{0, 0, -1}, Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{1e30f, 1e30f, 1},
                         Vec3{std::nanf(""), 0, 1}, Vec3{std::numeric_limits<float>::infinity(), 0, 1}})
     c.check(d);
+  c.check_batch();
   EXPECT_GE(c.count(), size_t(200000));
   return c.fast_fraction();
 }

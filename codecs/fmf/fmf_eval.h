@@ -9,7 +9,8 @@
 // does not fit a core's L2, so a block of queries is first ordered by its dominant direction
 // pair (a counting sort, stable): queries near one pair then find its rows in L1, and a run of
 // queries with identical weights (a renderer's frame under one light and view) blends once.
-// Results go back in the queries' order.
+// Results go back in the queries' order. The blend has an AVX-512 kernel and an AVX2 kernel
+// (fmf_eval.cpp); FmfModel hands it a copy of U and SxV on huge pages (eval_factors()).
 //
 // Contract: out[i * nc + c] equals the reference blend of eval_dir (per pair eval() sums, in
 // (a, b) order) to float rounding: the blend order differs (rows first, then the dot), and the
@@ -35,12 +36,20 @@ struct EvalFactors {
 // Runs in parallel over blocks of queries (OpenMP).
 void eval_weighted(const EvalFactors& f, std::span<const btfc_fmf_query> q, float* out);
 
-// Queries per sorted block: large enough that queries near one pair meet in the order (81 x 81
-// directions have 6561 pairs), small enough to keep per thread: the block's sorted queries,
-// results and converted queries take 131072 x 112 B = 14 MB per thread, allocated on first use
-// and kept (fresh memory faults in slowly on the VMs btfc runs on). Exposed for the benchmark's
-// block-size sweep.
-constexpr size_t k_eval_block = 131072;
+// Queries per sorted block: large enough that queries near one pair often meet in the order
+// (81 x 81 directions have 6561 pairs), small enough that the block's sorted queries, results
+// and converted queries (16384 x 112 B = 1.8 MB per thread, allocated on first use and kept:
+// fresh memory faults in slowly on the VMs btfc runs on) stay near a core's L2. 4096-262144 were
+// within the machines' noise of each other on Zen 5 (AVX-512); on Zen 3 (AVX2) 16384 was 0-30 %
+// faster than 131072 (docs/benchmarks.md). Exposed for the benchmark's block-size sweep.
+constexpr size_t k_eval_block = 16384;
+
+// Which blend kernel runs: the best for this CPU (AVX-512 registers, or the AVX2 kernel on CPUs
+// without AVX-512), or a named one where the CPU has it, so that tests check every kernel against
+// the reference on any machine. Process-wide; for tests and benchmarks. Returns false (and keeps
+// the current choice) when this CPU cannot run `path`.
+enum class EvalPath { best, avx2, generic };
+bool set_eval_path(EvalPath path);
 void eval_weighted_block(const EvalFactors& f, const btfc_fmf_query* q, size_t n, float* out);
 
 }  // namespace btfc::fmf

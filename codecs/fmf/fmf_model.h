@@ -16,6 +16,7 @@
 
 #include "codecs/fmf/fmf.h"
 #include "codecs/fmf/fmf_cl.h"
+#include "codecs/fmf/fmf_eval.h"
 #include "codecs/fmf/fmf_quant.h"
 #include "core/interp.h"
 #include "core/svd.h"
@@ -129,6 +130,14 @@ class FmfModel final : public Model {
   }
   ModelStats stats() const override { return m_stats; }
 
+  // The rgb factors as the CPU throughput path reads them (fmf_eval.h): a copy of U and SxV on
+  // transparent huge pages, made on the first call (thread-safe) and kept. Random queries touch
+  // 27 rows of U and one of SxV each, scattered over megabytes: on 4 KiB pages nearly every row is
+  // a TLB miss, and a miss on a VM walks two page tables (1.5x the blend rate on huge pages,
+  // docs/benchmarks.md). The copy costs the factors' size once more, and only when eval_batch
+  // runs on the CPU.
+  EvalFactors eval_factors() const;
+
  private:
   void undecorrelate(const float* ylog_u_v, float* rgb) const {
     if (m_cfg.color_model >= 0) return bonn_undecorrelate(m_cfg, ylog_u_v, rgb);
@@ -172,6 +181,8 @@ class FmfModel final : public Model {
   ModelStats m_stats;
   mutable std::mutex m_cl_mutex;
   mutable std::shared_ptr<fmf_cl::DeviceFactors> m_cl;
+  mutable std::once_flag m_eval_once;
+  mutable std::shared_ptr<float> m_eval_copy;
 };
 
 }  // namespace btfc::fmf
