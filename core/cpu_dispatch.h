@@ -36,5 +36,9 @@ const char* cpu_dispatch_level();
 // compiled with __attribute__((target("avx512f"))) (named *_avx512, core/thin_product.cpp,
 // core/sparse_sketch.cpp). False where GCC's x86-64 CPU tests are not available.
 bool cpu_has_avx512f();
+// Whether this CPU runs AVX2 with FMA (tested once): the check before a hand-written *_avx2
+// kernel (target("avx2,fma")), for CPUs without AVX-512 (core/thin_product.cpp,
+// codecs/fmf/fmf_eval.cpp).
+bool cpu_has_avx2_fma();
 
 }  // namespace btfc

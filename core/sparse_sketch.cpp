@@ -72,6 +72,62 @@ __attribute__((target("avx512f"))) double sketch_avx512(const float* B, size_t m
   }
   return e;
 }
+
+// The same for AVX2 (CPUs without AVX-512; the 16 registers cannot hold the bucket sums, so they
+// stay in the texel's row of W, in L1). A row group's signs flip as the reference's (the sign
+// bit), and each bucket adds its rows in the reference's order, so W is the same bits. The last
+// block (possibly partial) takes the reference's loop.
+__attribute__((target("avx2,fma"))) double sketch_avx2(const float* B, size_t m, const SparseSign& S, size_t j0, size_t j1, float* W,
+                                                     bool energy) {
+  const size_t groups = S.s / 16, q_all = (m + 15) / 16;
+  const __m256i bit_lo = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128), bit_hi = _mm256_slli_epi32(bit_lo, 8);
+  const __m256i sign = _mm256_set1_epi32(int(0x80000000u));
+  double e = 0;
+  for (size_t j = j0; j < j1; ++j) {
+    const float* col = B + j * m;
+    float* w = W + j * S.s;
+    std::fill(w, w + S.s, 0.0f);
+    __m256d s0 = _mm256_setzero_pd(), s1 = _mm256_setzero_pd();
+    size_t b0 = 0;
+    for (; b0 + groups <= q_all && 16 * (b0 + groups) <= m; b0 += groups)  // whole blocks of whole groups
+      for (size_t t = 0; t < S.layers; ++t) {
+        const uint32_t* pick = S.pick.data() + t * q_all + b0;
+        const uint16_t* negative = S.negative.data() + t * q_all;
+        for (size_t k = 0; k < groups; ++k) {
+          if (t == 0) _mm_prefetch(reinterpret_cast<const char*>(col + 16 * (b0 + k) + k_ahead), _MM_HINT_T0);
+          const size_t q = b0 + pick[k];
+          const __m256i bits = _mm256_set1_epi32(int(negative[q]));
+          const __m256 f0 = _mm256_castsi256_ps(_mm256_and_si256(_mm256_cmpeq_epi32(_mm256_and_si256(bits, bit_lo), bit_lo), sign));
+          const __m256 f1 = _mm256_castsi256_ps(_mm256_and_si256(_mm256_cmpeq_epi32(_mm256_and_si256(bits, bit_hi), bit_hi), sign));
+          const __m256 v0 = _mm256_xor_ps(_mm256_loadu_ps(col + 16 * q), f0), v1 = _mm256_xor_ps(_mm256_loadu_ps(col + 16 * q + 8), f1);
+          _mm256_storeu_ps(w + 16 * k, _mm256_add_ps(_mm256_loadu_ps(w + 16 * k), v0));
+          _mm256_storeu_ps(w + 16 * k + 8, _mm256_add_ps(_mm256_loadu_ps(w + 16 * k + 8), v1));
+          if (energy && t == 0) {
+            const __m256d a = _mm256_cvtps_pd(_mm256_castps256_ps128(v0)), b = _mm256_cvtps_pd(_mm256_extractf128_ps(v0, 1));
+            const __m256d c = _mm256_cvtps_pd(_mm256_castps256_ps128(v1)), d = _mm256_cvtps_pd(_mm256_extractf128_ps(v1, 1));
+            s0 = _mm256_fmadd_pd(a, a, s0), s1 = _mm256_fmadd_pd(b, b, s1);
+            s0 = _mm256_fmadd_pd(c, c, s0), s1 = _mm256_fmadd_pd(d, d, s1);
+          }
+        }
+      }
+    for (size_t t = 0; t < S.layers; ++t)  // the last block, as sketch_portable
+      for (size_t k = 0; b0 + k < q_all; ++k) {
+        const size_t q = b0 + S.pick[t * q_all + b0 + k];
+        const uint16_t negative = S.negative[t * q_all + q];
+        for (size_t r = 0; r < 16 && 16 * q + r < m; ++r) {
+          const float v = (negative >> r) & 1 ? -col[16 * q + r] : col[16 * q + r];
+          w[16 * k + r] += v;
+          if (energy && t == 0) e += double(v) * double(v);
+        }
+      }
+    if (energy) {
+      alignas(32) double t4[4];
+      _mm256_store_pd(t4, _mm256_add_pd(s0, s1));
+      e += (t4[0] + t4[1]) + (t4[2] + t4[3]);
+    }
+  }
+  return e;
+}
 #endif
 
 // The same sums in the same order (each bucket adds its rows block by block, layer by layer
@@ -122,14 +178,16 @@ SparseSign make_sparse_sign(size_t m, size_t s, uint64_t seed, size_t layers) {
 }
 
 namespace {
-void sketch(const float* B, size_t n, const SparseSign& S, float* W, double* energy, bool simd) {
+// simd: 0 the reference loop, 1 the best this CPU runs, 2 the AVX2 loop (tests).
+void sketch(const float* B, size_t n, const SparseSign& S, float* W, double* energy, int simd) {
   const size_t m = S.m;
   const int64_t tasks = int64_t((n + k_texels - 1) / k_texels);
   std::vector<double> part(size_t(tasks), 0.0);
 #ifdef BTFC_SKETCH_AVX512
-  const bool avx512 = simd && cpu_has_avx512f();
+  const bool avx512 = simd == 1 && cpu_has_avx512f();
+  const bool avx2 = !avx512 && simd != 0 && cpu_has_avx2_fma();
 #else
-  const bool avx512 = false;
+  const bool avx512 = false, avx2 = false;
   (void)simd;
 #endif
 #pragma omp parallel for schedule(dynamic, 1)
@@ -143,10 +201,14 @@ void sketch(const float* B, size_t n, const SparseSign& S, float* W, double* ene
                                   : sketch_avx512<0>(B, m, S, j0, j1, W, energy != nullptr);
       continue;
     }
+    if (avx2) {
+      part[size_t(t)] = sketch_avx2(B, m, S, j0, j1, W, energy != nullptr);
+      continue;
+    }
 #endif
     part[size_t(t)] = sketch_portable(B, m, S, j0, j1, W, energy != nullptr);
   }
-  (void)avx512;
+  (void)avx512, (void)avx2;
   if (energy) {
     *energy = 0;
     for (double v : part) *energy += v;  // fixed order: independent of the thread count
@@ -155,10 +217,21 @@ void sketch(const float* B, size_t n, const SparseSign& S, float* W, double* ene
 
 }  // namespace
 
-void sparse_sign_product(const float* B, size_t n, const SparseSign& S, float* W, double* energy) { sketch(B, n, S, W, energy, true); }
+void sparse_sign_product(const float* B, size_t n, const SparseSign& S, float* W, double* energy) { sketch(B, n, S, W, energy, 1); }
 
 void sparse_sign_product_reference(const float* B, size_t n, const SparseSign& S, float* W, double* energy) {
-  sketch(B, n, S, W, energy, false);
+  sketch(B, n, S, W, energy, 0);
+}
+
+bool sparse_sign_product_avx2(const float* B, size_t n, const SparseSign& S, float* W, double* energy) {
+#ifdef BTFC_SKETCH_AVX512
+  if (!cpu_has_avx2_fma()) return false;
+  sketch(B, n, S, W, energy, 2);
+  return true;
+#else
+  (void)B, (void)n, (void)S, (void)W, (void)energy;
+  return false;
+#endif
 }
 
 }  // namespace btfc

@@ -45,7 +45,10 @@ SparseSign make_sparse_sign(size_t m, size_t s, uint64_t seed, size_t layers);
 // `energy`, also *energy = ||B||_F^2, summed in double during the pass.
 void sparse_sign_product(const float* B, size_t n, const SparseSign& S, float* W, double* energy = nullptr);
 // The same, one value at a time on any CPU: the test oracle of the vector path (W bit for bit;
-// the energy to round-off), and the path without AVX-512.
+// the energy to round-off), and the path without AVX2.
 void sparse_sign_product_reference(const float* B, size_t n, const SparseSign& S, float* W, double* energy = nullptr);
+// The AVX2 loop (what CPUs without AVX-512 run), for tests on any CPU that has AVX2 + FMA; false
+// (W untouched) elsewhere.
+bool sparse_sign_product_avx2(const float* B, size_t n, const SparseSign& S, float* W, double* energy = nullptr);
 
 }  // namespace btfc

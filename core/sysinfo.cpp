@@ -68,6 +68,18 @@ bool cpu_has_avx512f() {
 #endif
 }
 
+bool cpu_has_avx2_fma() {
+#if defined(__x86_64__) && defined(__GNUC__)
+  static const bool yes = [] {
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+  }();
+  return yes;
+#else
+  return false;
+#endif
+}
+
 const char* cpu_dispatch_level() {
 #if BTFC_CPU_DISPATCH
   // The same order as the ifunc resolver of BTFC_CPU_CLONES tries them.

@@ -156,6 +156,12 @@ TEST(Svd, SparseSignSketchEqualsTheReference) {
       sparse_sign_product(b.data(), n, S, w.data(), &e);
       sparse_sign_product_reference(b.data(), n, S, w_ref.data(), &e_ref);
       ASSERT_EQ(0, std::memcmp(w.data(), w_ref.data(), w.size() * sizeof(float))) << m << " " << s;
+      std::vector<float> w2(s * n, -3.f);  // the AVX2 loop too, where the CPU has it
+      double e2 = -1;
+      if (sparse_sign_product_avx2(b.data(), n, S, w2.data(), &e2)) {
+        ASSERT_EQ(0, std::memcmp(w2.data(), w_ref.data(), w.size() * sizeof(float))) << "AVX2 " << m << " " << s;
+        EXPECT_NEAR(e2, e_ref, 1e-12 * e_ref + 1e-30) << "AVX2 " << m << " " << s;
+      }
       const double total = squared_norm(b.data(), b.size());
       EXPECT_NEAR(e, total, 1e-12 * total) << m << " " << s;
       EXPECT_NEAR(e_ref, total, 1e-12 * total);

@@ -183,15 +183,6 @@ __attribute__((target("avx2,fma"))) void blend_sorted_avx2(const EvalFactors& f,
   }
 }
 
-bool cpu_has_avx2_fma() {
-  static const bool yes = [] {
-    __builtin_cpu_init();
-    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
-  }();
-  return yes;
-}
-#else
-bool cpu_has_avx2_fma() { return false; }
 #endif
 
 std::atomic<EvalPath> g_path{EvalPath::best};
