@@ -2,6 +2,7 @@
 // offset, Bonn's colour models for factorizations read from Bonn files, and those
 // factorizations as models (make_fmf_model, fmf.h).
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -145,9 +146,11 @@ inline float log_normal(float x) {
   const uint32_t mi = (i & 0x7fffffu) | 0x3f000000u;  // [0.5, 1)
   float m;
   std::memcpy(&m, &mi, 4);
-  const bool low = m < 0.70710678f;
+  // m < sqrt(1/2), compared as the bit patterns of positive floats (the same order): a float
+  // compare here kept GCC from vectorizing the loop without AVX-512 (trapping math).
+  const bool low = mi < std::bit_cast<uint32_t>(0.70710678f);
   e -= int(low);
-  m = (low ? m + m : m) - 1.0f;
+  m = m * (low ? 2.0f : 1.0f) - 1.0f;  // m + m or m, exactly; a conditional add is a branch too
   const float z = m * m;
   float y = 7.0376836292e-2f;
   y = y * m - 1.1514610310e-1f;
@@ -165,26 +168,33 @@ inline float log_normal(float x) {
   return (m + y) + 0.693359375f * fe;
 }
 
-// The three channels of `rows` RGB triples; the body of both builds below. The arithmetic is the
-// same IEEE operations in the same order in both (no FMA: btfc compiles without contraction), so
-// the AVX-512 build returns the generic build's bits.
+// The three channels of `rows` RGB triples; the body of the builds below. The arithmetic is the
+// same IEEE operations in the same order in all (no FMA: btfc compiles without contraction), so
+// the AVX-512 and AVX2 builds return the generic build's bits.
 __attribute__((always_inline)) inline size_t channels_body(const float* abrdf, size_t rows, float offset, float* y, float* u,
                                                           float* v) {
   size_t clamped = 0;
   int odd = 0;
   const float a0 = k_yuv.m[0][0], a1 = k_yuv.m[0][1], a2 = k_yuv.m[0][2], b0 = k_yuv.m[1][0], b1 = k_yuv.m[1][1],
               b2 = k_yuv.m[1][2], c0 = k_yuv.m[2][0], c1 = k_yuv.m[2][1], c2 = k_yuv.m[2][2];
-#pragma omp simd reduction(+ : clamped) reduction(| : odd)
-  for (size_t r = 0; r < rows; ++r) {
+  // The count in 32-bit lanes, as wide as the floats' (a 64-bit count kept GCC from vectorizing
+  // the loop for AVX2), per block of at most 2^30 rows.
+  for (size_t r0 = 0; r0 < rows; r0 += size_t(1) << 30) {
+  const size_t r1 = std::min(rows, r0 + (size_t(1) << 30));
+  uint32_t count = 0;
+#pragma omp simd reduction(+ : count) reduction(| : odd)
+  for (size_t r = r0; r < r1; ++r) {
     const float R = abrdf[3 * r], G = abrdf[3 * r + 1], B = abrdf[3 * r + 2];
     float l = a0 * R + a1 * G + a2 * B;
-    clamped += size_t(l < 0);
+    count += uint32_t(l < 0);
     l = std::max(l, 0.0f);
     const float d = l + offset;
     u[r] = (b0 * R + b1 * G + b2 * B) / d;
     v[r] = (c0 * R + c1 * G + c2 * B) / d;
     y[r] = log_normal(d);
     odd |= int(!(d >= 1.17549435e-38f) | !(d <= 3.40282347e38f));
+  }
+  clamped += count;
   }
   if (odd)  // zero, denormal, inf or NaN sums: std::log's answer (NaN stays NaN)
     for (size_t r = 0; r < rows; ++r) {
@@ -201,14 +211,20 @@ size_t channels_generic(const float* abrdf, size_t rows, float offset, float* y,
 __attribute__((target("avx512f"))) size_t channels_avx512(const float* abrdf, size_t rows, float offset, float* y, float* u, float* v) {
   return channels_body(abrdf, rows, offset, y, u, v);
 }
+// AVX2 without FMA: no contraction either, so the same bits (CPUs without AVX-512 ran the
+// baseline build's 4 lanes before).
+__attribute__((target("avx2"))) size_t channels_avx2(const float* abrdf, size_t rows, float offset, float* y, float* u, float* v) {
+  return channels_body(abrdf, rows, offset, y, u, v);
+}
 #endif
 
 }  // namespace
 
 size_t dfmf_channels(const float* abrdf, size_t rows, float offset, float* y, float* u, float* v) {
 #if defined(__x86_64__) && defined(__GNUC__)
-  static const bool avx512 = cpu_has_avx512f();
+  static const bool avx512 = cpu_has_avx512f(), avx2 = cpu_has_avx2_fma();
   if (avx512) return channels_avx512(abrdf, rows, offset, y, u, v);
+  if (avx2) return channels_avx2(abrdf, rows, offset, y, u, v);
 #endif
   return channels_generic(abrdf, rows, offset, y, u, v);
 }
@@ -229,8 +245,8 @@ size_t dfmf_channel(const float* abrdf, size_t rows, int k, float offset, float*
 
 namespace {
 
-// The sums of one texel, vectorized: lanes sum in their own order, so the AVX-512 and the generic
-// build may differ in the last bits of a sum (the offset is printed to 9 digits; the processes of
+// The sums of one texel, vectorized: lanes sum in their own order, so the AVX-512, AVX2 and generic
+// builds may differ in the last bits of a sum (the offset is printed to 9 digits; the processes of
 // one factorization use the allreduced total, the same on all).
 __attribute__((always_inline)) inline void moments_body(const float* abrdf, size_t rows, double* sum_y, double* sum_y2) {
   const float a0 = k_yuv.m[0][0], a1 = k_yuv.m[0][1], a2 = k_yuv.m[0][2];
@@ -247,14 +263,18 @@ void moments_generic(const float* abrdf, size_t rows, double* sum_y, double* sum
 __attribute__((target("avx512f"))) void moments_avx512(const float* abrdf, size_t rows, double* sum_y, double* sum_y2) {
   moments_body(abrdf, rows, sum_y, sum_y2);
 }
+__attribute__((target("avx2"))) void moments_avx2(const float* abrdf, size_t rows, double* sum_y, double* sum_y2) {
+  moments_body(abrdf, rows, sum_y, sum_y2);
+}
 #endif
 
 }  // namespace
 
 void dfmf_luminance_moments(const float* abrdf, size_t rows, double* sum_y, double* sum_y2) {
 #if defined(__x86_64__) && defined(__GNUC__)
-  static const bool avx512 = cpu_has_avx512f();
+  static const bool avx512 = cpu_has_avx512f(), avx2 = cpu_has_avx2_fma();
   if (avx512) return moments_avx512(abrdf, rows, sum_y, sum_y2);
+  if (avx2) return moments_avx2(abrdf, rows, sum_y, sum_y2);
 #endif
   moments_generic(abrdf, rows, sum_y, sum_y2);
 }
