@@ -3,8 +3,10 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <omp.h>
 #include <vector>
 
+#include "core/blas_env.h"
 #include "core/cpu_dispatch.h"
 #include "core/memory.h"
 
@@ -156,6 +158,38 @@ void thin_nn(const float* B, size_t m, size_t n, const float* Xr, size_t lp, flo
 }
 #endif
 
+// The products where the kernels above do not run, as Eigen products (OpenBLAS when linked) on
+// slices in OpenMP threads with one BLAS thread each. OpenBLAS's own pool would spin
+// (sched_yield) against the OpenMP threads of the code between the products, e.g. dfmf's
+// channel conversion: 30 % of a dfmf encode's samples on a 2-core Zen 3 (docs/benchmarks.md).
+// Slices of texels for B^T Y, of rows for B X (a block of B's rows, with B's leading dimension).
+int slices_for(size_t work) {
+  const int threads = omp_in_parallel() ? 1 : std::max(1, omp_get_max_threads());
+  return int(std::clamp<size_t>(work / 64, 1, size_t(2 * threads)));
+}
+
+void eigen_tn(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z) {
+  ConstMapF map(B, Index(m), Index(n));
+  const int parts = slices_for(n);
+  SingleThreadedBlas one_blas_thread;
+#pragma omp parallel for schedule(dynamic, 1) if (parts > 1)
+  for (int p = 0; p < parts; ++p) {
+    const Index j0 = Index(n) * p / parts, j1 = Index(n) * (p + 1) / parts;
+    Z.middleRows(j0, j1 - j0).noalias() = map.middleCols(j0, j1 - j0).transpose() * Y;
+  }
+}
+
+void eigen_nn(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::Ref<Eigen::MatrixXf> Y) {
+  ConstMapF map(B, Index(m), Index(n));
+  const int parts = slices_for(m);
+  SingleThreadedBlas one_blas_thread;
+#pragma omp parallel for schedule(dynamic, 1) if (parts > 1)
+  for (int p = 0; p < parts; ++p) {
+    const Index r0 = Index(m) * p / parts, r1 = Index(m) * (p + 1) / parts;
+    Y.middleRows(r0, r1 - r0).noalias() = map.middleRows(r0, r1 - r0) * X;
+  }
+}
+
 }  // namespace
 
 void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::MatrixXf& Z, double* energy) {
@@ -185,8 +219,7 @@ void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, 
     return;
   }
 #endif
-  ConstMapF map(B, Index(m), Index(n));
-  Z.noalias() = map.transpose() * Y;
+  eigen_tn(B, m, n, Y, Z);
   if (energy) *energy = squared_norm(B, m * n);
 }
 
@@ -211,7 +244,7 @@ void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen:
     return;
   }
 #endif
-  Y.noalias() = map * X;
+  eigen_nn(B, m, n, X, Y);
 }
 
 namespace {

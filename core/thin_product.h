@@ -7,7 +7,8 @@
 // its thread pool spins beside the OpenMP one (docs/benchmarks.md, "fmf factorization"). These
 // kernels read B once, stream it sequentially with software prefetch, and keep the small
 // operand in L1/L2. They are AVX-512 only, chosen at run time; elsewhere (another CPU, l > 128)
-// both are Eigen products (OpenBLAS when linked). Float sums in a fixed order per output, so a
+// both are Eigen products (OpenBLAS when linked) on slices of B in OpenMP threads, one BLAS
+// thread each (OpenBLAS's own pool spins against the OpenMP threads of the code around). Float sums in a fixed order per output, so a
 // result does not depend on the thread count; within GEMM round-off of the reference products.
 #pragma once
 #include <Eigen/Core>

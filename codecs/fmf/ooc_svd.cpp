@@ -4,12 +4,10 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
-#include <optional>
 #include <vector>
 
 #include "codecs/fmf/ooc_pass.h"
 #include "core/blas_env.h"
-#include "core/cpu_dispatch.h"
 #include "core/thin_product.h"
 
 namespace btfc::fmf {
@@ -209,12 +207,10 @@ Result<std::vector<SvdResult>> streaming_svds(const ChunkSource& src, const std:
     if (o.max_rank < 1) return invalid_argument("SVD rank must be >= 1");
   // The passes run btfc's OpenMP kernels; the small BLAS products between and within them (the
   // orthonormalisation, W^T W per chunk) would leave OpenBLAS's own threads spinning against
-  // them for the 2 cores: 2.5-2.8 s instead of 2.2-2.3 s at rank 32, q 1, UBO2003 size. Where
-  // those kernels do not run (no AVX-512: core/thin_product.h), the passes' products are
-  // OpenBLAS's, which then needs its threads: one BLAS thread made the streamed SVD 1.7-1.9 x
-  // slower than the in-core one on a 2-core Zen 3 (docs/benchmarks.md).
-  std::optional<SingleThreadedBlas> serial_blas;
-  if (cpu_has_avx512f()) serial_blas.emplace();
+  // them for the 2 cores: 2.5-2.8 s instead of 2.2-2.3 s at rank 32, q 1, UBO2003 size. (Where
+  // btfc's kernels do not run, the passes' products are OpenBLAS's on OpenMP slices, one BLAS
+  // thread each: core/thin_product.h.)
+  SingleThreadedBlas serial_blas;
   std::vector<Krylov> ks;
   int total_passes = 0;
   for (const SvdOptions& o : opts) {
