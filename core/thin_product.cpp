@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <omp.h>
+#include <optional>
 #include <vector>
 
 #include "core/blas_env.h"
@@ -163,15 +164,18 @@ void thin_nn(const float* B, size_t m, size_t n, const float* Xr, size_t lp, flo
 // (sched_yield) against the OpenMP threads of the code between the products, e.g. dfmf's
 // channel conversion: 30 % of a dfmf encode's samples on a 2-core Zen 3 (docs/benchmarks.md).
 // Slices of texels for B^T Y, of rows for B X (a block of B's rows, with B's leading dimension).
+// One slice (the caller's thread, BLAS as set) inside a parallel region.
 int slices_for(size_t work) {
-  const int threads = omp_in_parallel() ? 1 : std::max(1, omp_get_max_threads());
+  if (omp_in_parallel()) return 1;
+  const int threads = std::max(1, omp_get_max_threads());
   return int(std::clamp<size_t>(work / 64, 1, size_t(2 * threads)));
 }
 
 void eigen_tn(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z) {
   ConstMapF map(B, Index(m), Index(n));
   const int parts = slices_for(n);
-  SingleThreadedBlas one_blas_thread;
+  std::optional<SingleThreadedBlas> one_blas_thread;  // not from inside a parallel region: the
+  if (parts > 1) one_blas_thread.emplace();            // setting is process-wide
 #pragma omp parallel for schedule(dynamic, 1) if (parts > 1)
   for (int p = 0; p < parts; ++p) {
     const Index j0 = Index(n) * p / parts, j1 = Index(n) * (p + 1) / parts;
@@ -182,7 +186,8 @@ void eigen_tn(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref
 void eigen_nn(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::Ref<Eigen::MatrixXf> Y) {
   ConstMapF map(B, Index(m), Index(n));
   const int parts = slices_for(m);
-  SingleThreadedBlas one_blas_thread;
+  std::optional<SingleThreadedBlas> one_blas_thread;
+  if (parts > 1) one_blas_thread.emplace();
 #pragma omp parallel for schedule(dynamic, 1) if (parts > 1)
   for (int p = 0; p < parts; ++p) {
     const Index r0 = Index(m) * p / parts, r1 = Index(m) * (p + 1) / parts;
