@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # A portable build (BTFC_NATIVE=OFF, the default) must run on the baseline x86-64 CPU: outside
 # the run-time dispatched functions (core/cpu_dispatch.h's clones "*.arch_x86_64_v3/v4", and the
-# functions named "*_f16c" / "*_avx512" compiled with a target attribute and called only after a
-# __builtin_cpu_supports check: the Bonn half conversions, core/thin_product.cpp's kernels) no function of btfc's own binaries
+# functions named "*_f16c" / "*_avx512" / "*_avx2" compiled with a target attribute and called only
+# after a __builtin_cpu_supports check: the Bonn half conversions, core/thin_product.cpp's and
+# core/sparse_sketch.cpp's kernels, fmf's eval and colour loops) no function of btfc's own binaries
 # may hold an instruction that needs more than SSE2: no AVX / AVX-512 (VEX / EVEX encoded, "v"
 # mnemonics, ymm / zmm registers), no BMI, no SSE4 / SSSE3. A stray -mavx2 on a file, an
 # intrinsic outside a dispatched function or a new -march flag fails here, on the build machine,
@@ -27,7 +28,7 @@ for bin in "$@"; do
           m ~ /^(popcnt|lzcnt|shlx|shrx|sarx|rorx|andn|bzhi|pdep|pext|movbe|blsr|blsi|blsmsk|crc32)$/ ||
           m ~ /^(pshufb|palignr|phadd[dw]|pmaddubsw|pmulhrsw|psign[bdw]|pabs[bdw])$/ ||
           m ~ /^(pmulld|ptest|pminsd|pmaxsd|pminud|pmaxud|pminsb|pmaxsb|pminuw|pmaxuw|pblendw|pblendvb|blendvp[sd]|blendp[sd]|roundp[sd]|rounds[sd]|dpp[sd]|insertps|extractps|pextr[bdq]|pinsr[bdq]|pmovsx|pmovzx|packusdw|pcmpeqq|pcmpgtq|movntdqa)/)
-        if (fn !~ /arch_x86_64_v[34]/ && fn !~ /_f16c/ && fn !~ /_avx512/) print fn " " m
+        if (fn !~ /arch_x86_64_v[34]/ && fn !~ /_f16c/ && fn !~ /_avx512/ && fn !~ /_avx2/) print fn " " m
     }' | sort -u)
   n_clones=$(objdump -t "$bin" 2>/dev/null | grep -c 'arch_x86_64_v[34]$' || true)
   if [ -n "$bad" ]; then
