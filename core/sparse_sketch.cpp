@@ -18,6 +18,22 @@ constexpr size_t k_max_groups = 64;  // s <= 1024: the per-texel sums stay in L1
 constexpr size_t k_texels = 64;     // texels per parallel task: a contiguous 64-column range of B
 constexpr size_t k_ahead = 2048;    // software prefetch distance in floats (8 KB: measured 1-8 KB alike)
 
+// Layer t of the block of row groups starting at b0 into the texel's bucket sums w, one value at
+// a time (the reference's order; the vector loops take it for a partial last block).
+inline void add_block_reference(const float* col, size_t m, const SparseSign& S, size_t q_all, size_t b0, size_t t, float* w,
+                                bool energy, double& e) {
+  const size_t groups = S.s / 16;
+  for (size_t k = 0; k < groups && b0 + k < q_all; ++k) {
+    const size_t q = b0 + S.pick[t * q_all + b0 + k];
+    const uint16_t negative = S.negative[t * q_all + q];
+    for (size_t r = 0; r < 16 && 16 * q + r < m; ++r) {
+      const float v = (negative >> r) & 1 ? -col[16 * q + r] : col[16 * q + r];
+      w[16 * k + r] += v;
+      if (energy && t == 0) e += double(v) * double(v);
+    }
+  }
+}
+
 #ifdef BTFC_SKETCH_AVX512
 // One vector of 16 rows (row group q) into its bucket group's accumulator, its squares into the
 // energy (in double, so it matches squared_norm to round-off).
@@ -110,16 +126,7 @@ __attribute__((target("avx2,fma"))) double sketch_avx2(const float* B, size_t m,
           }
         }
       }
-    for (size_t t = 0; t < S.layers; ++t)  // the last block, as sketch_portable
-      for (size_t k = 0; b0 + k < q_all; ++k) {
-        const size_t q = b0 + S.pick[t * q_all + b0 + k];
-        const uint16_t negative = S.negative[t * q_all + q];
-        for (size_t r = 0; r < 16 && 16 * q + r < m; ++r) {
-          const float v = (negative >> r) & 1 ? -col[16 * q + r] : col[16 * q + r];
-          w[16 * k + r] += v;
-          if (energy && t == 0) e += double(v) * double(v);
-        }
-      }
+    for (size_t t = 0; t < S.layers; ++t) add_block_reference(col, m, S, q_all, b0, t, w, energy, e);  // the last block
     if (energy) {
       alignas(32) double t4[4];
       _mm256_store_pd(t4, _mm256_add_pd(s0, s1));
@@ -140,16 +147,7 @@ double sketch_portable(const float* B, size_t m, const SparseSign& S, size_t j0,
     float* w = W + j * S.s;
     std::fill(w, w + S.s, 0.0f);
     for (size_t b0 = 0; b0 < q_all; b0 += groups)
-      for (size_t t = 0; t < S.layers; ++t)
-        for (size_t k = 0; k < groups && b0 + k < q_all; ++k) {
-          const size_t q = b0 + S.pick[t * q_all + b0 + k];
-          const uint16_t negative = S.negative[t * q_all + q];
-          for (size_t r = 0; r < 16 && 16 * q + r < m; ++r) {
-            const float v = (negative >> r) & 1 ? -col[16 * q + r] : col[16 * q + r];
-            w[16 * k + r] += v;
-            if (energy && t == 0) e += double(v) * double(v);
-          }
-        }
+      for (size_t t = 0; t < S.layers; ++t) add_block_reference(col, m, S, q_all, b0, t, w, energy, e);
   }
   return e;
 }

@@ -75,6 +75,17 @@ inline uint32_t dominant_pair(const btfc_fmf_query& e, int nL) {
   return uint32_t(e.light[a]) + uint32_t(nL) * uint32_t(e.view[b]);
 }
 
+// The 9 (row, weight) terms of a query's blend: row (light a, view b) with weight wl[a] wv[b],
+// or `zero` for a term of weight 0.
+inline void pair_rows(const Sorted& e, const EvalFactors& f, size_t W, const float* zero, const float* r[9], float w[9]) {
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b) {
+      const float wt = e.wl[a] * e.wv[b];
+      w[3 * a + b] = wt;
+      r[3 * a + b] = wt != 0 ? f.U + (size_t(e.light[a]) + size_t(f.nL) * size_t(e.view[b])) * W : zero;
+    }
+}
+
 // The sorted block's blend with everything in registers, for nc = NC channels of C = 16 PER
 // components (each channel's row starts on a vector). All 9 terms are summed, branch-free; a
 // term of weight 0 reads `zero` (so a zero weight contributes exactly 0, as the reference's
@@ -84,7 +95,6 @@ __attribute__((always_inline)) inline void blend_sorted(const EvalFactors& f, co
                                                         const float* zero, size_t ahead) {
   constexpr int V = NC * PER;
   constexpr size_t C = 16 * PER, W = NC * C;
-  const size_t nL = size_t(f.nL);
   v16 acc[V];
   const Sorted* prev = nullptr;
   for (size_t j = 0; j < n; ++j) {
@@ -96,12 +106,7 @@ __attribute__((always_inline)) inline void blend_sorted(const EvalFactors& f, co
     if (!prev || !same_pair(e, *prev)) {
       const float* r[9];
       float w[9];
-      for (int a = 0; a < 3; ++a)
-        for (int b = 0; b < 3; ++b) {
-          const float wt = e.wl[a] * e.wv[b];
-          w[3 * a + b] = wt;
-          r[3 * a + b] = wt != 0 ? f.U + (size_t(e.light[a]) + nL * size_t(e.view[b])) * W : zero;
-        }
+      pair_rows(e, f, W, zero, r, w);
       // Three chains of three (one per light vertex), then their sum: a chain of 9 dependent
       // FMAs would make the query's latency, not the FMA rate, the bound.
       for (int i = 0; i < V; ++i) {
@@ -134,7 +139,6 @@ __attribute__((target("avx2,fma"))) void blend_sorted_avx2(const EvalFactors& f,
                                                           const float* zero, size_t ahead) {
   constexpr int V = NC * S8;
   constexpr size_t C = 8 * S8, W = NC * C;
-  const size_t nL = size_t(f.nL);
   alignas(32) float acc[V * 8];
   alignas(16) float tail[4];
   const Sorted* prev = nullptr;
@@ -146,13 +150,10 @@ __attribute__((target("avx2,fma"))) void blend_sorted_avx2(const EvalFactors& f,
     const Sorted& e = s[j];
     if (!prev || !same_pair(e, *prev)) {
       const float* r[9];
+      float ws[9];
+      pair_rows(e, f, W, zero, r, ws);
       __m256 w[9];
-      for (int a = 0; a < 3; ++a)
-        for (int b = 0; b < 3; ++b) {
-          const float wt = e.wl[a] * e.wv[b];
-          w[3 * a + b] = _mm256_set1_ps(wt);
-          r[3 * a + b] = wt != 0 ? f.U + (size_t(e.light[a]) + nL * size_t(e.view[b])) * W : zero;
-        }
+      for (int i = 0; i < 9; ++i) w[i] = _mm256_set1_ps(ws[i]);
       for (int i = 0; i < V; ++i) {  // three chains of three, as the v16 kernel
         __m256 x0 = _mm256_mul_ps(w[0], _mm256_loadu_ps(r[0] + 8 * i));
         __m256 x1 = _mm256_mul_ps(w[3], _mm256_loadu_ps(r[3] + 8 * i));
