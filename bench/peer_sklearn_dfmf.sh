@@ -14,6 +14,8 @@
 #   sklearn  randomized_svd(n_components=R, n_oversamples=16, n_iter=Q) on each channel matrix,
 #            Q = 4, 3 and 1 (LU normalizer), the three factorization times summed (loading and
 #            the conversion are not timed: they favour scikit-learn)
+#   and both with q 1 and p 8 and 4 (btfc `oversample=P`, scikit-learn n_oversamples=P, LU): block
+#            Krylov keeps every block, so it needs less oversampling; both sides get the same grid
 # Errors are sqrt(||B||^2 - sum s_i^2) / ||B|| per channel (orthogonal projections: exact). A
 # run is at "equal error" when each of its three channel errors is within 1 % of the lowest any
 # run reached on that channel; the summary gives the ratio of the fastest such btfc run to the
@@ -38,7 +40,7 @@ trap cleanup EXIT
 
 # "sklearn rank R q Q NORM: T s, errors Ey Eu Ev, peak RSS X x input"
 sk() {
-  "$PY" - "$PREFIX" 6561 "$1" "$2" 16 "${3:-auto}" <<'EOF'
+  "$PY" - "$PREFIX" 6561 "$1" "$2" "${4:-16}" "${3:-auto}" <<'EOF'
 import resource, sys, time
 import numpy as np
 from sklearn.utils.extmath import randomized_svd
@@ -58,19 +60,20 @@ for ch in "yuv":
     errs.append(np.sqrt(max(0.0, total - float(np.sum(s.astype(np.float64) ** 2))) / total))
     del A, U, Vt
 peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 / 1e9
-print(f"sklearn    rank {rank} q {q} {norm}: {secs:.2f} s, errors {errs[0]:.6f} {errs[1]:.6f} {errs[2]:.6f}, peak RSS {peak / inp:.2f} x input", flush=True)
+print(f"sklearn    rank {rank} q {q} p {p} {norm}: {secs:.2f} s, errors {errs[0]:.6f} {errs[1]:.6f} {errs[2]:.6f}, peak RSS {peak / inp:.2f} x input", flush=True)
 EOF
 }
 bt() {
   local out
-  out=$("$BENCH" --codec "fmf:rank=$1:color=dfmf:power_iters=$2")
+  local p=${3:-16}
+  out=$("$BENCH" --codec "fmf:rank=$1:color=dfmf:power_iters=$2:oversample=$p")
   "$PY" - "$1" "$2" <<EOF
 import re
 out = """$out"""
 st = dict(re.findall(r"^\s+(\S+) = (\S+)$", out, re.M))
 enc = float(re.search(r"encode ([\d.]+) s", out).group(1))  # bench_fmf's timer around encode()
 mem = float(re.search(r"\(([\d.]+) x input\)", out).group(1))
-print(f"btfc       rank $1 q $2 dfmf: {enc:.2f} s, errors {float(st['rel_error.y']):.6f} {float(st['rel_error.u']):.6f} {float(st['rel_error.v']):.6f}, peak RSS {mem:.2f} x input"
+print(f"btfc       rank $1 q $2 p $p dfmf: {enc:.2f} s, errors {float(st['rel_error.y']):.6f} {float(st['rel_error.u']):.6f} {float(st['rel_error.v']):.6f}, peak RSS {mem:.2f} x input"
       f"  (Krylov blocks {st['krylov_blocks.y']} {st['krylov_blocks.u']} {st['krylov_blocks.v']})", flush=True)
 EOF
 }
@@ -86,18 +89,22 @@ for rep in $(seq 1 "$REPEAT"); do
     sk "$r" 4 | tee -a "$LOG"
     sk "$r" 3 | tee -a "$LOG"
     sk "$r" 1 LU | tee -a "$LOG"
+    for p in 8 4; do
+      bt "$r" 1 $p | tee -a "$LOG"
+      sk "$r" 1 LU $p | tee -a "$LOG"
+    done
   done
 done
 echo "## summary (medians over the repetitions); equal error = every channel within 1 % of its lowest error at that rank"
 "$PY" - "$LOG" <<'EOF'
 import re, statistics, sys
 runs = {}
-pat = r"(\w+)\s+rank (\d+) q (\d+) (\w+): ([\d.]+) s, errors ([\d.]+) ([\d.]+) ([\d.]+), peak RSS ([\d.]+) x input"
+pat = r"(\w+)\s+rank (\d+) q (\d+) p (\d+) (\w+): ([\d.]+) s, errors ([\d.]+) ([\d.]+) ([\d.]+), peak RSS ([\d.]+) x input"
 for line in open(sys.argv[1]):
     m = re.match(pat, line)
     if m:
-        who, rank, q, variant, secs, ey, eu, ev, mem = m.groups()
-        runs.setdefault((int(rank), who, variant, int(q)), []).append((float(secs), (float(ey), float(eu), float(ev)), float(mem)))
+        who, rank, q, p, variant, secs, ey, eu, ev, mem = m.groups()
+        runs.setdefault((int(rank), who, variant, int(q), int(p)), []).append((float(secs), (float(ey), float(eu), float(ev)), float(mem)))
 for rank in sorted({k[0] for k in runs}):
     rows = [(k, statistics.median(x[0] for x in v), tuple(statistics.median(x[1][c] for x in v) for c in range(3)), max(x[2] for x in v))
             for k, v in runs.items() if k[0] == rank]
@@ -105,12 +112,12 @@ for rank in sorted({k[0] for k in runs}):
     print(f"rank {rank}: lowest errors y {best[0]:.6f} u {best[1]:.6f} v {best[2]:.6f}")
     for k, t, e, mem in sorted(rows, key=lambda r: (r[0][1], -r[0][3])):
         worst = max(e[c] / best[c] for c in range(3))
-        print(f"  {k[1]:8s} {k[2]:5s} q {k[3]}: {t:7.2f} s  errors {e[0]:.6f} {e[1]:.6f} {e[2]:.6f} (worst channel {worst:.4f} x lowest)  peak {mem:.2f} x input")
+        print(f"  {k[1]:8s} {k[2]:5s} q {k[3]} p {k[4]}: {t:7.2f} s  errors {e[0]:.6f} {e[1]:.6f} {e[2]:.6f} (worst channel {worst:.4f} x lowest)  peak {mem:.2f} x input")
     ok = [r for r in rows if all(r[2][c] <= 1.01 * best[c] for c in range(3))]
     b = [r for r in ok if r[0][1] == "btfc"]
     s = [r for r in ok if r[0][1] == "sklearn"]
     if b and s:
         fb, fs = min(b, key=lambda r: r[1]), min(s, key=lambda r: r[1])
-        print(f"  equal error: btfc q {fb[0][3]} {fb[1]:.2f} s vs sklearn q {fs[0][3]} {fs[0][2]} {fs[1]:.2f} s -> ratio {fb[1] / fs[1]:.2f} (goal <= 0.5)")
+        print(f"  equal error: btfc q {fb[0][3]} p {fb[0][4]} {fb[1]:.2f} s vs sklearn q {fs[0][3]} p {fs[0][4]} {fs[0][2]} {fs[1]:.2f} s -> ratio {fb[1] / fs[1]:.2f} (goal <= 0.5)")
 EOF
 rm -f "$LOG"

@@ -24,6 +24,14 @@ using ConstMapF = Eigen::Map<const Eigen::MatrixXf>;
 
 namespace {
 
+// Sum of squares of p[0, count) in double, one block (vectorized per clone).
+BTFC_CPU_CLONES double block_squares(const float* p, size_t count) {
+  double s = 0;
+#pragma omp simd reduction(+ : s)
+  for (size_t i = 0; i < count; ++i) s += double(p[i]) * double(p[i]);
+  return s;
+}
+
 #ifdef BTFC_THIN_AVX512
 // ---- Z = B^T Y -------------------------------------------------------------------------------
 // 8-9 texel columns at a time, their values broadcast against a row of Y (row-major, l values =
@@ -66,13 +74,14 @@ __attribute__((target("avx512f"))) double squares_avx512(const float* p, size_t 
   return s;
 }
 
-// Yr: m x 16 NV row-major (zero-padded columns); Zr: n x 16 NV row-major. With `energy`, also
+// Yr: m x L row-major (zero-padded columns); Zr: n x L row-major. With `energy`, also
 // ||B||_F^2: each tile's columns are summed again right after the tile, from L2 (+4 % of the
-// pass), instead of in a separate pass over memory (which took half a pass's time).
-template <int NV>
-void thin_tn(const float* B, size_t m, size_t n, const float* Yr, float* Zr, double* energy) {
-  constexpr int TJ = std::min(16, (31 - NV) / NV);  // TJ x NV accumulators + NV of Y + 1 broadcast <= 32 registers
-  constexpr size_t k_rows = 2048;   // a chunk of Y's rows: 2048 x 16 NV floats, in L2
+// pass), instead of in a separate pass over memory (which took half a pass's time). Tile and
+// Tile1 are the kernel for TJ columns and for one; Squares sums a column segment's squares.
+using TnTile = void (*)(const float*, size_t, const float*, size_t, size_t, size_t, float*, bool);
+template <int TJ, TnTile Tile, TnTile Tile1, double (*Squares)(const float*, size_t)>
+void tn_driver(const float* B, size_t m, size_t n, const float* Yr, float* Zr, double* energy) {
+  constexpr size_t k_rows = 2048;   // a chunk of Y's rows: 2048 x L floats, in L2
   // Texels per parallel task: whole tiles only. With 64, NV 2 (TJ 14) left 8 texels of every
   // task to one-column tiles and ran at 275 GFLOP/s instead of 375 (l = 32, docs/benchmarks.md).
   constexpr size_t k_texels = 8 * TJ;
@@ -86,13 +95,13 @@ void thin_tn(const float* B, size_t m, size_t n, const float* Yr, float* Zr, dou
       const size_t k1 = std::min(m, k0 + k_rows);
       size_t j = j0;
       for (; j + TJ <= j1; j += TJ) {
-        tn_tile_avx512<NV, TJ>(B, m, Yr, k0, k1, j, Zr, k0 == 0);
+        Tile(B, m, Yr, k0, k1, j, Zr, k0 == 0);
         if (energy)
-          for (int t = 0; t < TJ; ++t) e += squares_avx512(B + (j + t) * m + k0, k1 - k0);
+          for (int t = 0; t < TJ; ++t) e += Squares(B + (j + t) * m + k0, k1 - k0);
       }
       for (; j < j1; ++j) {
-        tn_tile_avx512<NV, 1>(B, m, Yr, k0, k1, j, Zr, k0 == 0);
-        if (energy) e += squares_avx512(B + j * m + k0, k1 - k0);
+        Tile1(B, m, Yr, k0, k1, j, Zr, k0 == 0);
+        if (energy) e += Squares(B + j * m + k0, k1 - k0);
       }
     }
     if (energy) part[size_t(s)] = e;
@@ -101,6 +110,54 @@ void thin_tn(const float* B, size_t m, size_t n, const float* Yr, float* Zr, dou
     *energy = 0;
     for (double v : part) *energy += v;  // fixed order: independent of the thread count
   }
+}
+
+template <int NV>
+void thin_tn(const float* B, size_t m, size_t n, const float* Yr, float* Zr, double* energy) {
+  constexpr int TJ = std::min(16, (31 - NV) / NV);  // TJ x NV accumulators + NV of Y + 1 broadcast <= 32 registers
+  tn_driver<TJ, tn_tile_avx512<NV, TJ>, tn_tile_avx512<NV, 1>, squares_avx512>(B, m, n, Yr, Zr, energy);
+}
+
+// The same tiling for AVX2 (8 lanes, 16 registers: TJ x NV + NV + 1 <= 16), for l <= 32 only
+// (NV <= 4, TJ >= 2 texels per tile). Narrow products are bound by reading B, which this kernel
+// overlaps with its FMAs, where OpenBLAS first packs B and then multiplies: at the UBO2003 size
+// on a 2-core Zen 3, B^T Q took 0.25 / 0.35 / 0.65 s at l = 12 / 24 / 32 against OpenBLAS's
+// 0.55 / 0.70 / 0.78 s (a plain read of B: 0.18 s). At l = 40 and 48 the tiles (TJ 2 and 1)
+// spill or starve and were 5-10 x slower than OpenBLAS (docs/benchmarks.md). The loops are
+// unrolled by pragma: without, GCC kept the accumulator array on the stack (a store per FMA).
+template <int NV, int TJ>
+__attribute__((target("avx2,fma"))) void tn_tile_avx2(const float* B, size_t ldb, const float* Yr, size_t k0, size_t k1, size_t j0,
+                                                     float* Zr, bool first) {
+  constexpr int L = 8 * NV;
+  __m256 acc[TJ][NV];
+#pragma GCC unroll 16
+  for (int t = 0; t < TJ; ++t)
+#pragma GCC unroll 4
+    for (int v = 0; v < NV; ++v) acc[t][v] = first ? _mm256_setzero_ps() : _mm256_loadu_ps(Zr + (j0 + t) * L + 8 * v);
+  const float* col[TJ];
+#pragma GCC unroll 16
+  for (int t = 0; t < TJ; ++t) col[t] = B + (j0 + t) * ldb;
+  for (size_t k = k0; k < k1; ++k) {
+    __m256 y[NV];
+#pragma GCC unroll 4
+    for (int v = 0; v < NV; ++v) y[v] = _mm256_loadu_ps(Yr + k * L + 8 * v);
+#pragma GCC unroll 16
+    for (int t = 0; t < TJ; ++t) {
+      const __m256 b = _mm256_broadcast_ss(col[t] + k);
+#pragma GCC unroll 4
+      for (int v = 0; v < NV; ++v) acc[t][v] = _mm256_fmadd_ps(b, y[v], acc[t][v]);
+    }
+  }
+#pragma GCC unroll 16
+  for (int t = 0; t < TJ; ++t)
+#pragma GCC unroll 4
+    for (int v = 0; v < NV; ++v) _mm256_storeu_ps(Zr + (j0 + t) * L + 8 * v, acc[t][v]);
+}
+
+template <int NV>
+void thin_tn_avx2(const float* B, size_t m, size_t n, const float* Yr, float* Zr, double* energy) {
+  constexpr int TJ = (15 - NV) / NV;  // 14, 6, 4, 2 texels per tile
+  tn_driver<TJ, tn_tile_avx2<NV, TJ>, tn_tile_avx2<NV, 1>, block_squares>(B, m, n, Yr, Zr, energy);
 }
 
 // ---- Y = B X ---------------------------------------------------------------------------------
@@ -207,25 +264,54 @@ void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen:
   thin_product(B, m, n, X, Eigen::Ref<Eigen::MatrixXf>(Y));
 }
 
-void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy) {
-  const Index l = Y.cols();
+namespace {
 #ifdef BTFC_THIN_AVX512
-  const Index nv = (l + 15) / 16;
+using TnFn = void (*)(const float*, size_t, size_t, const float*, float*, double*);
+
+// Z = B^T Y through a kernel on Y and Z padded to L columns (row-major, in huge pages).
+void tn_padded(TnFn fn, Index L, const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy) {
+  const Index l = Y.cols();
+  PageBuffer<float> yr_buf(m * size_t(L)), zr_buf(n * size_t(L));
+  Eigen::Map<MatrixXfR> Yr(yr_buf.data(), Index(m), L), Zr(zr_buf.data(), Index(n), L);
+  Yr.leftCols(l) = Y;
+  Yr.rightCols(L - l).setZero();
+  fn(B, m, n, Yr.data(), Zr.data(), energy);
+  Z = Zr.leftCols(l);
+}
+
+// The AVX2 kernel where it applies (l <= 32, AVX2 + FMA); false otherwise.
+bool tn_avx2(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy) {
+  const Index nv = (Y.cols() + 7) / 8;
+  if (!cpu_has_avx2_fma() || nv < 1 || nv > 4 || m < 1 || n < 1) return false;
+  static constexpr TnFn k_fns[4] = {thin_tn_avx2<1>, thin_tn_avx2<2>, thin_tn_avx2<3>, thin_tn_avx2<4>};
+  tn_padded(k_fns[nv - 1], 8 * nv, B, m, n, Y, Z, energy);
+  return true;
+}
+#endif
+}  // namespace
+
+void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy) {
+#ifdef BTFC_THIN_AVX512
+  const Index nv = (Y.cols() + 15) / 16;
   if (cpu_has_avx512f() && nv >= 1 && nv <= 8 && m >= 1 && n >= 1) {
-    const Index L = 16 * nv;
-    PageBuffer<float> yr_buf(m * size_t(L)), zr_buf(n * size_t(L));
-    Eigen::Map<MatrixXfR> Yr(yr_buf.data(), Index(m), L), Zr(zr_buf.data(), Index(n), L);
-    Yr.leftCols(l) = Y;
-    Yr.rightCols(L - l).setZero();
-    using Fn = void (*)(const float*, size_t, size_t, const float*, float*, double*);
-    static constexpr Fn k_fns[8] = {thin_tn<1>, thin_tn<2>, thin_tn<3>, thin_tn<4>, thin_tn<5>, thin_tn<6>, thin_tn<7>, thin_tn<8>};
-    k_fns[nv - 1](B, m, n, Yr.data(), Zr.data(), energy);
-    Z = Zr.leftCols(l);
+    static constexpr TnFn k_fns[8] = {thin_tn<1>, thin_tn<2>, thin_tn<3>, thin_tn<4>, thin_tn<5>, thin_tn<6>, thin_tn<7>, thin_tn<8>};
+    tn_padded(k_fns[nv - 1], 16 * nv, B, m, n, Y, Z, energy);
     return;
   }
+  if (tn_avx2(B, m, n, Y, Z, energy)) return;
 #endif
   eigen_tn(B, m, n, Y, Z);
   if (energy) *energy = squared_norm(B, m * n);
+}
+
+bool transposed_product_avx2(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::MatrixXf& Z, double* energy) {
+#ifdef BTFC_THIN_AVX512
+  Z.resize(Index(n), Y.cols());
+  return tn_avx2(B, m, n, Y, Z, energy);
+#else
+  (void)B, (void)m, (void)n, (void)Y, (void)Z, (void)energy;
+  return false;
+#endif
 }
 
 void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::Ref<Eigen::MatrixXf> Y) {
@@ -251,16 +337,6 @@ void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen:
 #endif
   eigen_nn(B, m, n, X, Y);
 }
-
-namespace {
-// Sum of squares of p[0, count) in double, one block (vectorized per clone).
-BTFC_CPU_CLONES double block_squares(const float* p, size_t count) {
-  double s = 0;
-#pragma omp simd reduction(+ : s)
-  for (size_t i = 0; i < count; ++i) s += double(p[i]) * double(p[i]);
-  return s;
-}
-}  // namespace
 
 double squared_norm(const float* B, size_t count) {
   constexpr size_t k_block = size_t(1) << 20;

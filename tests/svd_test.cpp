@@ -10,6 +10,7 @@
 #include <random>
 #include <string>
 
+#include "core/cpu_dispatch.h"
 #include "core/sparse_sketch.h"
 #include "core/svd.h"
 #include "core/thin_product.h"
@@ -262,11 +263,12 @@ TEST(Svd, TransposedProductKernelEqualsTheReference) {
   // the 8- or 16-texel tiles, and more rows than one 2048-row chunk.
   std::mt19937_64 rng(4);
   std::uniform_real_distribution<float> u(-1.f, 1.f);
+  int avx2_runs = 0;
   for (auto [m, n] : {std::pair<size_t, size_t>{2500, 203}, {37, 70}}) {
     std::vector<float> b(m * n);
     for (float& x : b) x = u(rng);
     Eigen::Map<const Eigen::MatrixXf> B(b.data(), Eigen::Index(m), Eigen::Index(n));
-    for (int l : {1, 5, 16, 17, 33, 48, 80, 100, 128, 130}) {
+    for (int l : {1, 5, 8, 16, 17, 24, 25, 32, 33, 48, 80, 100, 128, 130}) {
       Eigen::MatrixXf Y(Eigen::Index(m), l), Z;
       for (Eigen::Index i = 0; i < Y.size(); ++i) Y.data()[i] = u(rng);
       transposed_product(b.data(), m, n, Y, Z);
@@ -275,8 +277,19 @@ TEST(Svd, TransposedProductKernelEqualsTheReference) {
       ASSERT_EQ(Z.cols(), l);
       // Float sums of m products of magnitude <= 1: within m x 2^-24 x a few of the double result.
       EXPECT_LT((Z.cast<double>() - ref).cwiseAbs().maxCoeff(), 4e-7 * double(m)) << "m " << m << " l " << l;
+      // The AVX2 kernel (CPUs without AVX-512 run it for l <= 32), with the energy sum.
+      Eigen::MatrixXf Z2;
+      double e2 = -1;
+      if (transposed_product_avx2(b.data(), m, n, Y, Z2, &e2)) {
+        ASSERT_LE(l, 32);
+        ASSERT_EQ(Z2.rows(), Eigen::Index(n));
+        EXPECT_LT((Z2.cast<double>() - ref).cwiseAbs().maxCoeff(), 4e-7 * double(m)) << "avx2, m " << m << " l " << l;
+        EXPECT_NEAR(e2, B.cast<double>().squaredNorm(), 1e-12 * B.cast<double>().squaredNorm());
+        ++avx2_runs;
+      }
     }
   }
+  if (cpu_has_avx2_fma()) EXPECT_EQ(avx2_runs, 2 * 8) << "every l <= 32, both shapes";
 }
 
 TEST(Svd, ThinProductKernelEqualsTheReference) {
