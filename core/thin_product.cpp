@@ -74,13 +74,15 @@ __attribute__((target("avx512f"))) double squares_avx512(const float* p, size_t 
   return s;
 }
 
-// Yr: m x L row-major (zero-padded columns); Zr: n x L row-major. With `energy`, also
-// ||B||_F^2: each tile's columns are summed again right after the tile, from L2 (+4 % of the
-// pass), instead of in a separate pass over memory (which took half a pass's time). Tile and
-// Tile1 are the kernel for TJ columns and for one; Squares sums a column segment's squares.
+// Yr: `groups` blocks of m x L row-major (zero-padded columns); Zr: as many blocks of n x L
+// row-major. A tile of B's columns is multiplied by every group's block in turn, so B is read
+// from memory once and again from L1/L2 for the other groups. With `energy`, also ||B||_F^2:
+// each tile's columns are summed again right after the tile, from L2 (+4 % of the pass),
+// instead of in a separate pass over memory (which took half a pass's time). Tile and Tile1 are
+// the kernel for TJ columns and for one; Squares sums a column segment's squares.
 using TnTile = void (*)(const float*, size_t, const float*, size_t, size_t, size_t, float*, bool);
-template <int TJ, TnTile Tile, TnTile Tile1, double (*Squares)(const float*, size_t)>
-void tn_driver(const float* B, size_t m, size_t n, const float* Yr, float* Zr, double* energy) {
+template <int TJ, size_t L, TnTile Tile, TnTile Tile1, double (*Squares)(const float*, size_t)>
+void tn_driver(const float* B, size_t m, size_t n, const float* Yr, float* Zr, double* energy, size_t groups) {
   constexpr size_t k_rows = 2048;   // a chunk of Y's rows: 2048 x L floats, in L2
   // Texels per parallel task: whole tiles only. With 64, NV 2 (TJ 14) left 8 texels of every
   // task to one-column tiles and ran at 275 GFLOP/s instead of 375 (l = 32, docs/benchmarks.md).
@@ -95,12 +97,12 @@ void tn_driver(const float* B, size_t m, size_t n, const float* Yr, float* Zr, d
       const size_t k1 = std::min(m, k0 + k_rows);
       size_t j = j0;
       for (; j + TJ <= j1; j += TJ) {
-        Tile(B, m, Yr, k0, k1, j, Zr, k0 == 0);
+        for (size_t g = 0; g < groups; ++g) Tile(B, m, Yr + g * m * L, k0, k1, j, Zr + g * n * L, k0 == 0);
         if (energy)
           for (int t = 0; t < TJ; ++t) e += Squares(B + (j + t) * m + k0, k1 - k0);
       }
       for (; j < j1; ++j) {
-        Tile1(B, m, Yr, k0, k1, j, Zr, k0 == 0);
+        for (size_t g = 0; g < groups; ++g) Tile1(B, m, Yr + g * m * L, k0, k1, j, Zr + g * n * L, k0 == 0);
         if (energy) e += Squares(B + j * m + k0, k1 - k0);
       }
     }
@@ -113,18 +115,19 @@ void tn_driver(const float* B, size_t m, size_t n, const float* Yr, float* Zr, d
 }
 
 template <int NV>
-void thin_tn(const float* B, size_t m, size_t n, const float* Yr, float* Zr, double* energy) {
+void thin_tn(const float* B, size_t m, size_t n, const float* Yr, float* Zr, double* energy, size_t groups) {
   constexpr int TJ = std::min(16, (31 - NV) / NV);  // TJ x NV accumulators + NV of Y + 1 broadcast <= 32 registers
-  tn_driver<TJ, tn_tile_avx512<NV, TJ>, tn_tile_avx512<NV, 1>, squares_avx512>(B, m, n, Yr, Zr, energy);
+  tn_driver<TJ, 16 * NV, tn_tile_avx512<NV, TJ>, tn_tile_avx512<NV, 1>, squares_avx512>(B, m, n, Yr, Zr, energy, groups);
 }
 
-// The same tiling for AVX2 (8 lanes, 16 registers: TJ x NV + NV + 1 <= 16), for l <= 32 only
-// (NV <= 4, TJ >= 2 texels per tile). Narrow products are bound by reading B, which this kernel
-// overlaps with its FMAs, where OpenBLAS first packs B and then multiplies: at the UBO2003 size
-// on a 2-core Zen 3, B^T Q took 0.25 / 0.35 / 0.65 s at l = 12 / 24 / 32 against OpenBLAS's
-// 0.55 / 0.70 / 0.78 s (a plain read of B: 0.18 s). At l = 40 and 48 the tiles (TJ 2 and 1)
-// spill or starve and were 5-10 x slower than OpenBLAS (docs/benchmarks.md). The loops are
-// unrolled by pragma: without, GCC kept the accumulator array on the stack (a store per FMA).
+// The same tiling for AVX2 (8 lanes, 16 registers: TJ x NV + NV + 1 <= 16), for l <= 32 in one
+// group (NV <= 4, TJ >= 2 texels per tile) and up to 96 in groups of 24 (tn_driver). Narrow
+// products are bound by reading B, which this kernel overlaps with its FMAs, where OpenBLAS
+// first packs B and then multiplies. At the UBO2003 size on a 2-core Zen 3 (a plain read of B:
+// 0.16-0.18 s), B^T Q took 0.23 / 0.35 / 0.64 / 0.68 / 1.03 / 1.39 s at l = 12 / 24 / 32 / 48 /
+// 64 / 96 against OpenBLAS's 0.55 / 0.70 / 0.81 / 1.00 / 1.23 / 1.65 s. One group of 40 or 48
+// (TJ 2 or 1) spilled or starved: 4-10 x slower than OpenBLAS (docs/benchmarks.md). The loops
+// are unrolled by pragma: without, GCC kept the accumulator array on the stack (a store per FMA).
 template <int NV, int TJ>
 __attribute__((target("avx2,fma"))) void tn_tile_avx2(const float* B, size_t ldb, const float* Yr, size_t k0, size_t k1, size_t j0,
                                                      float* Zr, bool first) {
@@ -155,9 +158,9 @@ __attribute__((target("avx2,fma"))) void tn_tile_avx2(const float* B, size_t ldb
 }
 
 template <int NV>
-void thin_tn_avx2(const float* B, size_t m, size_t n, const float* Yr, float* Zr, double* energy) {
+void thin_tn_avx2(const float* B, size_t m, size_t n, const float* Yr, float* Zr, double* energy, size_t groups) {
   constexpr int TJ = (15 - NV) / NV;  // 14, 6, 4, 2 texels per tile
-  tn_driver<TJ, tn_tile_avx2<NV, TJ>, tn_tile_avx2<NV, 1>, block_squares>(B, m, n, Yr, Zr, energy);
+  tn_driver<TJ, 8 * NV, tn_tile_avx2<NV, TJ>, tn_tile_avx2<NV, 1>, block_squares>(B, m, n, Yr, Zr, energy, groups);
 }
 
 // ---- Y = B X ---------------------------------------------------------------------------------
@@ -266,25 +269,37 @@ void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen:
 
 namespace {
 #ifdef BTFC_THIN_AVX512
-using TnFn = void (*)(const float*, size_t, size_t, const float*, float*, double*);
+constexpr Index k_tn_avx2_max = 96;  // widest l for the AVX2 kernel (4 groups of 24)
+using TnFn = void (*)(const float*, size_t, size_t, const float*, float*, double*, size_t);
 
-// Z = B^T Y through a kernel on Y and Z padded to L columns (row-major, in huge pages).
-void tn_padded(TnFn fn, Index L, const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy) {
+// Z = B^T Y through a kernel on Y and Z in `groups` blocks of L columns (row-major, zero-padded,
+// in huge pages).
+void tn_padded(TnFn fn, Index L, Index groups, const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z,
+               double* energy) {
   const Index l = Y.cols();
-  PageBuffer<float> yr_buf(m * size_t(L)), zr_buf(n * size_t(L));
-  Eigen::Map<MatrixXfR> Yr(yr_buf.data(), Index(m), L), Zr(zr_buf.data(), Index(n), L);
-  Yr.leftCols(l) = Y;
-  Yr.rightCols(L - l).setZero();
-  fn(B, m, n, Yr.data(), Zr.data(), energy);
-  Z = Zr.leftCols(l);
+  PageBuffer<float> yr_buf(m * size_t(L * groups)), zr_buf(n * size_t(L * groups));
+  for (Index g = 0; g < groups; ++g) {
+    Eigen::Map<MatrixXfR> Yr(yr_buf.data() + size_t(g) * m * size_t(L), Index(m), L);
+    const Index c0 = g * L, w = std::min(L, l - c0);
+    Yr.leftCols(w) = Y.middleCols(c0, w);
+    Yr.rightCols(L - w).setZero();
+  }
+  fn(B, m, n, yr_buf.data(), zr_buf.data(), energy, size_t(groups));
+  for (Index g = 0; g < groups; ++g) {
+    Eigen::Map<const MatrixXfR> Zr(zr_buf.data() + size_t(g) * n * size_t(L), Index(n), L);
+    const Index c0 = g * L, w = std::min(L, l - c0);
+    Z.middleCols(c0, w) = Zr.leftCols(w);
+  }
 }
 
-// The AVX2 kernel where it applies (l <= 32, AVX2 + FMA); false otherwise.
+// The AVX2 kernel where it applies (AVX2 + FMA, l <= k_tn_avx2_max); false otherwise. Up to 32
+// columns in one group; wider, groups of 24 (NV 3, TJ 4: the widest tile that keeps 4 texels).
 bool tn_avx2(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy) {
-  const Index nv = (Y.cols() + 7) / 8;
-  if (!cpu_has_avx2_fma() || nv < 1 || nv > 4 || m < 1 || n < 1) return false;
+  const Index l = Y.cols(), nv = (l + 7) / 8;
+  if (!cpu_has_avx2_fma() || l < 1 || l > k_tn_avx2_max || m < 1 || n < 1) return false;
   static constexpr TnFn k_fns[4] = {thin_tn_avx2<1>, thin_tn_avx2<2>, thin_tn_avx2<3>, thin_tn_avx2<4>};
-  tn_padded(k_fns[nv - 1], 8 * nv, B, m, n, Y, Z, energy);
+  if (nv <= 4) tn_padded(k_fns[nv - 1], 8 * nv, 1, B, m, n, Y, Z, energy);
+  else tn_padded(thin_tn_avx2<3>, 24, (l + 23) / 24, B, m, n, Y, Z, energy);
   return true;
 }
 #endif
@@ -295,7 +310,7 @@ void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, 
   const Index nv = (Y.cols() + 15) / 16;
   if (cpu_has_avx512f() && nv >= 1 && nv <= 8 && m >= 1 && n >= 1) {
     static constexpr TnFn k_fns[8] = {thin_tn<1>, thin_tn<2>, thin_tn<3>, thin_tn<4>, thin_tn<5>, thin_tn<6>, thin_tn<7>, thin_tn<8>};
-    tn_padded(k_fns[nv - 1], 16 * nv, B, m, n, Y, Z, energy);
+    tn_padded(k_fns[nv - 1], 16 * nv, 1, B, m, n, Y, Z, energy);
     return;
   }
   if (tn_avx2(B, m, n, Y, Z, energy)) return;
