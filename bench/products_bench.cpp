@@ -1,0 +1,110 @@
+// The passes' thin products alone (core/thin_product.h), against OpenBLAS's sgemm on the same
+// data in the same run (issue 24): for each width l, the best of 3 of
+//   read    ||B||_F^2 (squared_norm: one read of B, the memory bound of a pass)
+//   B X     thin_product (m x l)          and OpenBLAS on slices of rows
+//   B^T Q   transposed_product (n x l)    and OpenBLAS on slices of texels
+// (OpenBLAS as btfc's fallback runs it: through Eigen, on 2 x threads OpenMP slices with one BLAS
+// thread each; one OpenBLAS call on its own threads was 1.5-5 x slower at these widths.)
+// with GFLOP/s (2 m n l per product). B is a --dump file of bench_fmf (the UBO2003 size: 19683 x
+// 65536 float32, 5.16 GB), read into huge pages as the in-core SVD holds it, or random
+// (--texels N columns of 19683 rows) when no file is given.
+//
+//   bench_products [--load FILE] [--rows 19683] [--texels 65536] [--widths "12 24 32 48 64 96"]
+#include <Eigen/Dense>
+#include <cstdio>
+#include <cstdlib>
+#include <fcntl.h>
+#include <omp.h>
+#include <random>
+#include <sstream>
+#include <string>
+#include <unistd.h>
+#include <vector>
+
+#include "bench/bench_timing.h"
+#include "core/blas_env.h"
+#include "core/cpu_dispatch.h"
+#include "core/memory.h"
+#include "core/thin_product.h"
+
+using namespace btfc;
+using btfc::bench::best_of;
+
+int main(int argc, char** argv) {
+  std::string load, widths = "12 24 32 48 64 96";
+  size_t m = 19683, n = 65536;
+  for (int i = 1; i + 1 < argc; i += 2) {
+    const std::string a = argv[i];
+    if (a == "--load") load = argv[i + 1];
+    else if (a == "--rows") m = size_t(std::atoll(argv[i + 1]));
+    else if (a == "--texels") n = size_t(std::atoll(argv[i + 1]));
+    else if (a == "--widths") widths = argv[i + 1];
+    else {
+      std::fprintf(stderr, "bench_products: unknown option %s\n", a.c_str());
+      return 2;
+    }
+  }
+  if (!load.empty()) {
+    const int fd = open(load.c_str(), O_RDONLY);
+    const off_t size = fd >= 0 ? lseek(fd, 0, SEEK_END) : -1;
+    if (fd < 0 || size <= 0 || size_t(size) % (4 * m) != 0) {
+      std::fprintf(stderr, "bench_products: %s: cannot open, or not a whole number of %zu-row float32 columns\n", load.c_str(), m);
+      return 1;
+    }
+    n = size_t(size) / (4 * m);
+    close(fd);
+  }
+  PageBuffer<float> buf(m * n);
+  if (!load.empty()) {
+    const int fd = open(load.c_str(), O_RDONLY);
+    char* p = reinterpret_cast<char*>(buf.data());
+    for (size_t off = 0, total = m * n * 4; off < total;) {
+      const ssize_t r = read(fd, p + off, std::min<size_t>(total - off, size_t(1) << 26));
+      if (r <= 0) {
+        std::fprintf(stderr, "bench_products: %s: read failed\n", load.c_str());
+        return 1;
+      }
+      off += size_t(r);
+    }
+    close(fd);
+  } else {
+    std::mt19937 rng(1);
+    std::uniform_real_distribution<float> u(0.f, 1.f);
+    for (size_t i = 0; i < m * n; ++i) buf.data()[i] = u(rng);
+  }
+  const Eigen::Map<const Eigen::MatrixXf> B(buf.data(), Eigen::Index(m), Eigen::Index(n));
+  std::printf("B: %zu x %zu float32 (%.2f GB)%s, loops: %s\n", m, n, double(m * n) * 4 / 1e9, load.empty() ? " random" : "",
+              cpu_dispatch_level());
+  std::printf("%4s %8s | %8s %6s %8s %6s | %8s %6s %8s %6s\n", "l", "read s", "B X s", "GF/s", "OpenBLAS", "GF/s", "B^T Q s", "GF/s",
+              "OpenBLAS", "GF/s");
+  std::istringstream ws(widths);
+  for (int l; ws >> l;) {
+    Eigen::MatrixXf X = Eigen::MatrixXf::Random(Eigen::Index(n), l), Q = Eigen::MatrixXf::Random(Eigen::Index(m), l);
+    Eigen::MatrixXf Y(Eigen::Index(m), l), Z(Eigen::Index(n), l);
+    double sink = 0;
+    const double t_read = best_of(3, [&] { sink += squared_norm(buf.data(), m * n); });
+    const double t_nn = best_of(3, [&] { thin_product(buf.data(), m, n, X, Y); });
+    const int parts = 2 * omp_get_max_threads();
+    const double t_nn_blas = best_of(3, [&] {
+      SingleThreadedBlas one;
+#pragma omp parallel for schedule(dynamic, 1)
+      for (int p = 0; p < parts; ++p) {
+        const Eigen::Index r0 = Eigen::Index(m) * p / parts, r1 = Eigen::Index(m) * (p + 1) / parts;
+        Y.middleRows(r0, r1 - r0).noalias() = B.middleRows(r0, r1 - r0) * X;
+      }
+    });
+    const double t_tn = best_of(3, [&] { transposed_product(buf.data(), m, n, Q, Z); });
+    const double t_tn_blas = best_of(3, [&] {
+      SingleThreadedBlas one;
+#pragma omp parallel for schedule(dynamic, 1)
+      for (int p = 0; p < parts; ++p) {
+        const Eigen::Index j0 = Eigen::Index(n) * p / parts, j1 = Eigen::Index(n) * (p + 1) / parts;
+        Z.middleRows(j0, j1 - j0).noalias() = B.middleCols(j0, j1 - j0).transpose() * Q;
+      }
+    });
+    const double gf = 2.0 * double(m) * double(n) * double(l) / 1e9;
+    std::printf("%4d %8.3f | %8.3f %6.0f %8.3f %6.0f | %8.3f %6.0f %8.3f %6.0f%s\n", l, t_read, t_nn, gf / t_nn, t_nn_blas, gf / t_nn_blas,
+                t_tn, gf / t_tn, t_tn_blas, gf / t_tn_blas, sink < 0 ? " " : "");
+  }
+  return 0;
+}
