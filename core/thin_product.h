@@ -7,9 +7,11 @@
 // its thread pool spins beside the OpenMP one (docs/benchmarks.md, "fmf factorization"). These
 // kernels read B once, stream it sequentially with software prefetch, and keep the small
 // operand in L1/L2. They are AVX-512, chosen at run time, plus an AVX2 B^T Y for l <= 96;
-// elsewhere (another CPU, wider l) the products are Eigen products (OpenBLAS when linked) on slices of B in OpenMP threads, one BLAS
-// thread each (OpenBLAS's own pool spins against the OpenMP threads of the code around). Float sums in a fixed order per output, so a
-// result does not depend on the thread count; within GEMM round-off of the reference products.
+// elsewhere (another CPU, wider l, and B X without AVX-512) the products are Eigen products
+// (OpenBLAS when linked) on slices of B in OpenMP threads, one BLAS thread each (OpenBLAS's own
+// pool spins against the OpenMP threads of the code around). Float sums in a fixed order per
+// output, so a result does not depend on the thread count; within GEMM round-off of the
+// reference products.
 #pragma once
 #include <Eigen/Core>
 #include <cstddef>
@@ -24,7 +26,8 @@ void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, 
 void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::MatrixXf& Z, double* energy = nullptr);
 
 // For tests: transposed_product through its AVX2 kernel (the one CPUs without AVX-512 run for
-// l <= 96) on any CPU with AVX2 + FMA. Returns false, Z unset, where that kernel does not apply.
+// l <= 96) on any CPU with AVX2 + FMA. Returns false where that kernel does not apply (Z is then
+// resized to n x l but not written).
 bool transposed_product_avx2(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::MatrixXf& Z, double* energy = nullptr);
 
 // Y = B X: Y m x l, X n x l, different memory. A MatrixXf Y is resized; a Ref must be m x l.
