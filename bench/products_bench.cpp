@@ -3,6 +3,7 @@
 //   read    ||B||_F^2 (squared_norm: one read of B, the memory bound of a pass)
 //   B X     thin_product (m x l)          and OpenBLAS on slices of rows
 //   B^T Q   transposed_product (n x l)    and OpenBLAS on slices of texels
+// and, once, the first pass's sparse sign sketches of B's rows (S^T B) and of its columns (B S).
 // (OpenBLAS as btfc's fallback runs it: through Eigen, on 2 x threads OpenMP slices with one BLAS
 // thread each; one OpenBLAS call on its own threads was 1.5-5 x slower at these widths.)
 // with GFLOP/s (2 m n l per product). B is a --dump file of bench_fmf (the UBO2003 size: 19683 x
@@ -25,6 +26,7 @@
 #include "core/blas_env.h"
 #include "core/cpu_dispatch.h"
 #include "core/memory.h"
+#include "core/sparse_sketch.h"
 #include "core/thin_product.h"
 
 using namespace btfc;
@@ -75,6 +77,20 @@ int main(int argc, char** argv) {
   const Eigen::Map<const Eigen::MatrixXf> B(buf.data(), Eigen::Index(m), Eigen::Index(n));
   std::printf("B: %zu x %zu float32 (%.2f GB)%s, loops: %s\n", m, n, double(m * n) * 4 / 1e9, load.empty() ? " random" : "",
               cpu_dispatch_level());
+  {  // the sparse sign sketches of the first pass (s = 256 buckets, two per row or column)
+    const size_t sk = 256, chunk = 4096;
+    const SparseSign rows_s = make_sparse_sign(m, sk, 1, 2), cols_s = make_sparse_sign(n, sk, 1, 2);
+    PageBuffer<float> wr(sk * chunk), wc(m * sk);
+    double e = 0;
+    const double t_rows = best_of(3, [&] {
+      for (size_t j0 = 0; j0 < n; j0 += chunk) sparse_sign_product(buf.data() + j0 * m, std::min(chunk, n - j0), rows_s, wr.data(), &e);
+    });
+    const double t_cols = best_of(3, [&] { sparse_sign_columns(buf.data(), m, m, n, cols_s, wc.data(), &e); });
+    const SparseSign cols_1 = make_sparse_sign(n, sk, 1, 1);
+    const double t_cols1 = best_of(3, [&] { sparse_sign_columns(buf.data(), m, m, n, cols_1, wc.data(), &e); });
+    std::printf("sparse sign sketches (s = %zu, with ||B||^2): rows S^T B %.3f s, columns B S %.3f s (one per column: %.3f s)%s\n", sk,
+                t_rows, t_cols, t_cols1, e < 0 ? " " : "");
+  }
   std::printf("%4s %8s | %8s %6s %8s %6s | %8s %6s %8s %6s\n", "l", "read s", "B X s", "GF/s", "OpenBLAS", "GF/s", "B^T Q s", "GF/s",
               "OpenBLAS", "GF/s");
   std::istringstream ws(widths);

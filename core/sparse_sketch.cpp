@@ -232,4 +232,83 @@ bool sparse_sign_product_avx2(const float* B, size_t n, const SparseSign& S, flo
 #endif
 }
 
+namespace {
+// A parallel task of sparse_sign_columns: up to 2048 rows of B and 16 buckets; a bucket's sum
+// (8 KB) stays in L1 while its texels' pieces of B (8 KB each) come from memory.
+constexpr size_t k_column_rows = 2048, k_column_buckets = 16;
+
+// acc[0, count) += v or -= v; with `energy`, the squares of v summed into e (in double).
+BTFC_CPU_CLONES void add_piece(float* acc, const float* v, size_t count, bool negative, bool energy, double& e) {
+  if (negative) {
+#pragma omp simd
+    for (size_t i = 0; i < count; ++i) acc[i] -= v[i];
+  } else {
+#pragma omp simd
+    for (size_t i = 0; i < count; ++i) acc[i] += v[i];
+  }
+  if (energy) {
+    double s = 0;
+#pragma omp simd reduction(+ : s)
+    for (size_t i = 0; i < count; ++i) s += double(v[i]) * double(v[i]);
+    e += s;
+  }
+}
+}  // namespace
+
+void sparse_sign_columns(const float* B, size_t ldb, size_t m, size_t n, const SparseSign& S, float* W, double* energy, size_t first) {
+  // Each bucket's texels, in texel order and layer by layer, inverted from the row groups'
+  // picks (only the blocks of row groups that hold texels [first, first + n)): a task sums one
+  // bucket at a time in L1. An entry: the texel (from first), bit 30 set in its first layer,
+  // bit 31 when it enters negated.
+  constexpr uint32_t k_first = 1u << 30, k_texel = k_first - 1;
+  const size_t groups = S.s / 16, q_all = (S.m + 15) / 16, end = first + n;
+  std::vector<uint32_t> bucket(S.layers * n), start(S.s + 1, 0), list(S.layers * n);
+  for (size_t t = 0; t < S.layers; ++t)
+    for (size_t b0 = first / 16 / groups * groups; b0 < (end + 15) / 16; b0 += groups)
+      for (size_t k = 0; k < groups && b0 + k < q_all; ++k) {
+        const size_t q = b0 + S.pick[t * q_all + b0 + k];
+        for (size_t r = 0; r < 16; ++r)
+          if (16 * q + r >= first && 16 * q + r < end) bucket[t * n + 16 * q + r - first] = uint32_t(16 * k + r);
+      }
+  for (uint32_t b : bucket) ++start[b + 1];
+  for (size_t b = 0; b < S.s; ++b) start[b + 1] += start[b];
+  {
+    std::vector<uint32_t> fill(start.begin(), start.end() - 1);
+    for (size_t j = 0; j < n; ++j)
+      for (size_t t = 0; t < S.layers; ++t) {
+        const size_t g = first + j;
+        const uint16_t negative = S.negative[t * q_all + g / 16];
+        list[fill[bucket[t * n + j]]++] = uint32_t(j) | (uint32_t((negative >> (g % 16)) & 1u) << 31) | (t == 0 ? k_first : 0u);
+      }
+  }
+  // Tasks: a block of rows and a range of buckets (the buckets read disjoint texels).
+  const size_t row_blocks = (m + k_column_rows - 1) / k_column_rows, ranges = S.s / k_column_buckets;
+  const int64_t tasks = int64_t(row_blocks * ranges);
+  std::vector<double> part(size_t(tasks), 0.0);
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int64_t task = 0; task < tasks; ++task) {
+    const size_t i0 = size_t(task) / ranges * k_column_rows, rows = std::min(k_column_rows, m - i0);
+    const size_t b0 = size_t(task) % ranges * k_column_buckets;
+    double e = 0;
+    for (size_t b = b0; b < b0 + k_column_buckets; ++b) {
+      float* acc = W + b * m + i0;
+      std::fill_n(acc, rows, 0.0f);
+      for (uint32_t at = start[b]; at < start[b + 1]; ++at) {
+        const uint32_t c = list[at];
+        const float* piece = B + size_t(c & k_texel) * ldb + i0;
+        if (at + 1 < list.size()) {  // the next piece: a jump the hardware prefetcher does not take
+          const float* next = B + size_t(list[at + 1] & k_texel) * ldb + i0;
+          for (size_t i = 0; i < rows; i += 16) __builtin_prefetch(next + i);
+        }
+        add_piece(acc, piece, rows, (c >> 31) != 0, energy && (c & k_first), e);  // squares once: in the first layer
+      }
+    }
+    part[size_t(task)] = e;
+  }
+  if (energy) {
+    *energy = 0;
+    for (double v : part) *energy += v;  // fixed order: independent of the thread count
+  }
+}
+
 }  // namespace btfc

@@ -1,8 +1,10 @@
-// A sparse sign sketch of B's rows: the first pass of the block Krylov SVD (core/svd.cpp) at
-// memory speed instead of GEMM speed.
+// Sparse sign sketches of B's rows (S^T B) and of its columns (B S): the first pass of the block
+// Krylov SVDs (core/svd.cpp, codecs/fmf/ooc_svd.cpp: the column sketch, B S, as both build their
+// basis on the rows side; the row sketch is the column sketch's test oracle) at memory speed
+// instead of GEMM speed.
 //
-// The randomized range finder starts from B^T Omega with Omega m x l Gaussian: a pass of 2 m n l
-// flops, as costly as every later pass. With the composite test matrix Omega = S G (a sparse
+// The randomized range finder starts from B^T Omega with Omega m x l Gaussian (or B Pi, Pi n x l,
+// from the other side): a pass of 2 m n l flops, as costly as every later pass. With the composite test matrix Omega = S G (a sparse
 // sign embedding S, m x s, with zeta = 1-2 entries +-1 per row, then a Gaussian G, s x l),
 // B^T Omega = (S^T B)^T G: S^T B costs zeta adds per element of B (the pass is then bound by
 // reading B, not by the FMA units), and the Gaussian acts on the s x n sketch only (2 s n l
@@ -50,5 +52,18 @@ void sparse_sign_product_reference(const float* B, size_t n, const SparseSign& S
 // The AVX2 loop (what CPUs without AVX-512 run), for tests on any CPU that has AVX2 + FMA; false
 // (W untouched) elsewhere.
 bool sparse_sign_product_avx2(const float* B, size_t n, const SparseSign& S, float* W, double* energy = nullptr);
+
+// The same sketch from the other side, on B's columns: W = B S, B m x n column-major with leading
+// dimension ldb >= m (a block of a taller matrix's rows) holding texels [first, first + n) of
+// the S.m that S was made for (make_sparse_sign(S.m, s, ...): texel j's bucket and sign as row
+// j's above; n < 2^30), W m x s column-major (so the sums over chunks of texels add up to the
+// whole matrix's). Parallel over blocks of 2048 rows; within one, bucket by bucket, each bucket's
+// texels added (or subtracted) into a sum held in L1 while their pieces of B stream from memory:
+// a pass at about the speed of reading B with one layer (each layer reads B once more). Each
+// bucket sums its texels in texel order (layer by layer within a texel), so the result does not
+// depend on the thread count. With `energy`, also *energy = ||B||_F^2 in double. The first block
+// of the in-core block Krylov SVD (core/svd.cpp).
+void sparse_sign_columns(const float* B, size_t ldb, size_t m, size_t n, const SparseSign& S, float* W, double* energy = nullptr,
+                         size_t first = 0);
 
 }  // namespace btfc

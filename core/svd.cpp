@@ -271,63 +271,85 @@ bool cholesky_qr_round(Eigen::Ref<MatrixXd> X) {
 
 }  // namespace
 
-// Nonzeros per row of the sketch. With one (CountSketch) a row's weight meets one other set of
-// rows per bucket; two halve the chance that a direction concentrated on few rows cancels out,
-// at no measured cost (the pass stays bound by reading B). Over six seeds, 16384 texels of the
-// UBO2003-size matrix, rank 32, 2 blocks: 1, 2 and 4 nonzeros and the dense Gaussian start gave
-// the same mean error within the seed-to-seed spread (docs/benchmarks.md).
-constexpr size_t k_sketch_layers = 2;
-
 // The sketch's buckets: s = 4 l rounded up to a multiple of 128, at least 256 (then as good a
-// start as a Gaussian one, sparse_sketch.h), when B has at least 4 s rows (fewer: the dense pass
-// is cheap there and the sketch hardly smaller than B) and s <= 1024 (l <= 256).
-RowSketch make_row_sketch(size_t m, Index l, const SvdOptions& opt) {
-  RowSketch r;
-  const size_t s = (std::max<size_t>(4 * size_t(l), 256) + 127) / 128 * 128;  // 256, 384: accumulators in registers
-  if (opt.sparse_sketch && s <= 1024 && m >= 4 * s) {
-    r.S = make_sparse_sign(m, s, opt.seed, k_sketch_layers);
+// start as a Gaussian one, sparse_sketch.h), when B has at least 4 s columns (fewer: the dense
+// pass is cheap there and the sketch hardly smaller than B) and s <= 1024 (l <= 256). One
+// nonzero per column (CountSketch): sparse_sign_columns reads a texel's column once per layer,
+// so a second layer would double the pass (0.73 s instead of 0.46 s at UBO2003 size). On the
+// rows, over six seeds, 1, 2 and 4 nonzeros and the dense Gaussian start gave the same mean
+// error within the seed-to-seed spread (docs/benchmarks.md).
+namespace {
+size_t sketch_buckets(Index l) { return (std::max<size_t>(4 * size_t(l), 256) + 127) / 128 * 128; }
+bool sketch_sparse(size_t n, size_t s) { return s <= 1024 && n >= 4 * s && n < (size_t(1) << 30); }
+// Rows of B per block of column_sketch_product: its scratch holds rows x s floats, at most 2 MiB
+// and at most n l floats (what a dense Pi would take; the out-of-core plans count that), 16 rows
+// at least: 2048 rows at the UBO2003 size (n = 65536, s = 256).
+size_t sketch_rows(size_t m, size_t n, Index l, size_t s) {
+  const size_t floats = std::min<size_t>(size_t(1) << 19, n * size_t(l));
+  return std::min(m, std::clamp<size_t>(floats / s, 16, 2048));
+}
+}  // namespace
+
+size_t column_sketch_bytes(size_t m, size_t n, Index l) {
+  const size_t s = sketch_buckets(l);
+  return sketch_sparse(n, s) ? sketch_rows(m, n, l, s) * s * sizeof(float) : 0;
+}
+
+Sketch make_column_sketch(size_t n, Index l, const SvdOptions& opt) {
+  Sketch r;
+  const size_t s = sketch_buckets(l);
+  if (opt.sparse_sketch && sketch_sparse(n, s)) {
+    r.S = make_sparse_sign(n, s, opt.seed, 1);
     r.G = gaussian(Index(r.S.s), l, opt.seed);
   } else {
-    r.G = gaussian(Index(m), l, opt.seed);
+    r.G = gaussian(Index(n), l, opt.seed);
   }
   return r;
 }
 
-// Sparse: W = S^T B in one pass at memory speed (and ||B||_F^2), then W^T G, in chunks of texels
-// so W (s x chunk) stays a small reused buffer (fresh pages cost time).
-void row_sketch_product(const float* B, size_t n, const RowSketch& sketch, Eigen::Ref<MatrixXf> Z, double* energy) {
+// Sparse: W = B S in one pass at memory speed (and ||B||_F^2), then W G; dense: B G.
+void column_sketch_product(const float* B, size_t m, size_t n, const Sketch& sketch, Eigen::Ref<MatrixXf> Y, double* energy,
+                           size_t first, std::vector<float>* scratch) {
   if (!sketch.sparse()) {
-    double e = 0;
-    transposed_product(B, size_t(sketch.G.rows()), n, sketch.G, Z, energy ? &e : nullptr);
-    if (energy) *energy += e;
+    thin_product(B, m, n, sketch.G.middleRows(Index(first), Index(n)), Y);
+    if (energy) *energy = squared_norm(B, m * n);
     return;
   }
-  const size_t m = sketch.S.m, s = sketch.S.s, chunk = std::min<size_t>(n, 4096);
-  PageBuffer<float> w(s * chunk);
-  for (size_t j0 = 0; j0 < n; j0 += chunk) {
-    const size_t nc = std::min(chunk, n - j0);
+  // By blocks of rows, so the sketch W = B S (m x s) is never whole: a reused rows x s buffer.
+  const size_t s = sketch.S.s, rows = sketch_rows(m, sketch.S.m, sketch.G.cols(), s);
+  std::vector<float> own;
+  std::vector<float>& w = scratch ? *scratch : own;
+  w.resize(rows * s);
+  if (energy) *energy = 0;
+  for (size_t i0 = 0; i0 < m; i0 += rows) {
+    const size_t h = std::min(rows, m - i0);
     double e = 0;
-    sparse_sign_product(B + j0 * m, nc, sketch.S, w.data(), energy ? &e : nullptr);
-    if (energy) *energy += e;  // in chunk order: independent of the thread count
-    transposed_product(w.data(), s, nc, sketch.G, Z.middleRows(Index(j0), Index(nc)));
+    sparse_sign_columns(B + i0, m, h, n, sketch.S, w.data(), energy ? &e : nullptr, first);
+    if (energy) *energy += e;  // in block order: independent of the thread count
+    Y.middleRows(Index(i0), Index(h)).noalias() = Eigen::Map<const MatrixXf>(w.data(), Index(h), Index(s)) * sketch.G;
   }
 }
 
 // X := an orthonormal basis of X's columns orthogonal to P's: block classical Gram-Schmidt and
 // QR, twice ("twice is enough"; the second round after normalising, so a block that is noise
 // after the projection, as when the Krylov space has exhausted B's range, is still made
-// orthogonal to P to round-off). The projections are n x (used) x l double GEMMs. The QR is
+// orthogonal to P to round-off). The projections are (rows of X) x (used) x l double GEMMs. The QR is
 // Cholesky QR (CholeskyQR2 over the two rounds: 10-20x faster than Householder for 65536 x 48,
 // whose unblocked reflectors were a third of a Krylov run's time), Householder where a round's
 // Gram matrix is too ill-conditioned (rank-deficient or exhausted blocks, zero data).
 //
-// A column that lies in span(P) to double precision (an exhausted range: B^T Y of a constant
+// A column that lies in span(P) to double precision (an exhausted range: B B^T Q of a constant
 // matrix is exactly constant in float, like a column already in P) leaves a residual of pure
-// rounding after the first projection, which can itself lie along P; normalised, it would enter
-// the basis as a second copy of a direction already there (the Ritz values then count that
+// rounding after a projection, which can itself lie along P; normalised, it would enter the
+// basis as a second copy of a direction already there (the Ritz values then count that
 // direction's energy once per copy). Such columns (residual below 1e-9 of the column) are
 // replaced by pseudo-random ones before the QR: a random direction has a component outside
 // span(P) that the rounds keep; it carries no energy of B and so changes no kept component.
+// After the second round X is checked (orthonormal, orthogonal to P to 1e-10). It can fail where
+// float rounding leaves X rank-deficient after the projection (a constant matrix's exhausted
+// blocks: B B^T Q is constant but for the rounding of the float product): the Householder
+// fallback then completes X with arbitrary columns, possibly inside span(P), and X is taken
+// instead from the Householder QR of [P X] (orthogonal to P by construction).
 void orthonormalize_against(const Eigen::Ref<const MatrixXd>& P, Index used, Eigen::Ref<MatrixXd> X) {
   auto project = [&] {
     if (used == 0) return;
@@ -335,58 +357,72 @@ void orthonormalize_against(const Eigen::Ref<const MatrixXd>& P, Index used, Eig
     MatrixXd C = Pu.transpose() * X;
     X.noalias() -= Pu * C;
   };
-  if (used > 0) {
-    const Eigen::VectorXd before = X.colwise().norm();
-    project();
-    for (Index c = 0; c < X.cols(); ++c) {
-      if (X.col(c).norm() > 1e-9 * before(c) && before(c) > 0) continue;
-      std::mt19937_64 rng(0x9E3779B97F4A7C15ull ^ uint64_t(used + c));
-      for (Index i = 0; i < X.rows(); ++i) X(i, c) = double(rng() >> 11) * (1.0 / 9007199254740992.0) - 0.5;
-    }
-  }
   auto qr = [&] {
     if (cholesky_qr_round(X)) return;
     Eigen::HouseholderQR<MatrixXd> h(X);
     X = h.householderQ() * MatrixXd::Identity(X.rows(), X.cols());
   };
+  const Index l = X.cols();
+  if (used > 0) {
+    const Eigen::VectorXd before = X.colwise().norm();
+    project();
+    for (Index c = 0; c < l; ++c) {
+      if (X.col(c).norm() > 1e-9 * before(c) && before(c) > 0) continue;
+      std::mt19937_64 rng(0x9E3779B97F4A7C15ull ^ uint64_t(used + c));
+      for (Index i = 0; i < X.rows(); ++i) X(i, c) = double(rng() >> 11) * (1.0 / 9007199254740992.0) - 0.5;
+    }
+  }
   qr();
   project();
   qr();
+  if (used == 0 || used + l > X.rows()) return;
+  // The check, and the fallback: Householder's Q of [P X], whose columns after P's are
+  // orthonormal and orthogonal to span(P) whatever X holds.
+  const double off_p = (P.leftCols(used).transpose() * X).cwiseAbs().maxCoeff();
+  const double off_x = (X.transpose() * X - MatrixXd::Identity(l, l)).cwiseAbs().maxCoeff();
+  if (off_p <= 1e-10 && off_x <= 1e-10) return;
+  MatrixXd A(X.rows(), used + l);
+  A << P.leftCols(used), X;
+  Eigen::HouseholderQR<MatrixXd> h(A);
+  X = (h.householderQ() * MatrixXd::Identity(A.rows(), A.cols())).rightCols(l);
 }
 
 namespace {
 
-// Randomized block Krylov SVD (Musco and Musco 2015; the Ritz step of Halko et al. 2011,
-// section 4.3, on the right-hand side): blocks X_1 = orth(B^T Omega), X_{i+1} = orth(B^T B X_i)
-// (Omega = S G, a sparse sign sketch and a Gaussian, for tall B: make_row_sketch)
-// with every block kept and made orthogonal to the earlier ones, so P = [X_1 .. X_k] is an
-// orthonormal basis of the Krylov space K_k(B^T B, B^T Omega). Each block costs two passes
-// over B (B^T Y and Y = B X), as one power iteration does, but the basis grows by l columns per
-// block instead of being replaced, which takes the rank-C error to the Eckart-Young optimum in
-// fewer passes (measured on the UBO2003-size matrix in docs/benchmarks.md). B P = [Y_1 .. Y_k]
-// is already known from the passes, so the Ritz step (the SVD of B P) needs no further pass:
-// B ~ (B P) P^T, and with B P = Qy R, R = Ur S Vr^T, U = Qy Ur and SxV = P Vr S. The error of
-// B P P^T truncated to rank C is ||B||^2 - sum of the C largest S^2, the same estimate as before.
-// Stops early, after at least two blocks, when a block improved that rank-C error by less than
-// k_krylov_stop of itself (the remaining gap to the optimum then is a fraction of that), and
-// before the basis would exceed the small side of B (k_krylov_stop, svd.h).
+// Randomized block Krylov SVD (Musco and Musco 2015, Algorithm 2; the Ritz step of Halko et al.
+// 2011, section 4.3) on the rows side: blocks Q_1 = orth(B Pi), Q_{i+1} = orth(B B^T Q_i) (Pi =
+// S G, a sparse sign sketch of B's columns and a Gaussian, for wide enough B:
+// make_column_sketch), every block kept and made orthogonal to the earlier ones, so Q = [Q_1 ..
+// Q_k] is an orthonormal basis of the Krylov space K_k(B B^T, B Pi). Block i's second pass,
+// W_i^T = B^T Q_i, serves twice: it is the next block's start (Q_{i+1} from B W_i^T) and block
+// i's part of W^T = B^T Q, the projection the Ritz step needs (B ~ Q Q^T B = Q W). So k blocks
+// cost the sketch (a read of B), k passes B^T Q_i (btfc's kernels, core/thin_product.h) and
+// k - 1 passes B X: one B X fewer than the same Krylov space built on the texel side, whose Ritz
+// step needs B P of its last block (B X is OpenBLAS's product on most CPUs, slower than btfc's
+// B^T Y: docs/benchmarks.md). The Ritz step is the SVD of W = Q^T B from the eigenpairs of
+// W W^T = E L E^T (w x w, double; mostly computed already for the stopping test): U = Q E,
+// orthonormal at any conditioning, and SxV = W^T E = B^T U, the exact projection. The error of
+// Q Q^T B truncated to rank C is ||B||^2 - sum of the C largest eigenvalues. Stops early, after
+// at least two blocks, when a block improved that error by less than k_krylov_stop of itself
+// (the remaining gap to the optimum then is a fraction of that), and before the basis would
+// exceed the small side of B (k_krylov_stop, svd.h).
 
-// out = A M (rows x cols, float) for a tall A, in blocks of rows: the double product of a
-// block at a time, so no rows x cols double temporary (its fresh pages cost more than the product).
+// out = A M (rows x cols, float) for a tall A (float or double), in blocks of rows: the double
+// product of a block at a time, so no rows x cols double temporary (its fresh pages cost more
+// than the product).
 template <class A, class M>
 void rows_times(const A& a, const M& mat, MatrixXfR& out) {
   constexpr Index k_rows = 4096;
   MatrixXd block;
   for (Index i = 0; i < a.rows(); i += k_rows) {
     const Index h = std::min(k_rows, a.rows() - i);
-    block.noalias() = a.middleRows(i, h) * mat;
+    block.noalias() = a.middleRows(i, h).template cast<double>() * mat;
     out.middleRows(i, h) = block.cast<float>();
   }
 }
 
-// A column-major matrix in huge-page scratch memory (core/memory.h): the Krylov basis and B P
-// are the SVD's largest buffers (65536 x 96 doubles at rank 32), the n x l float blocks the
-// next (fresh 4 KiB pages for those cost 25-65 ms a run). Not zeroed.
+// A column-major matrix in huge-page scratch memory (core/memory.h): the Krylov basis and W^T
+// are the SVD's largest buffers (19683 x 80 doubles and 65536 x 80 floats at rank 32). Not zeroed.
 template <class Scalar>
 class PageMatrix {
   using Mat = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>;
@@ -410,97 +446,76 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
   r.method = "randomized";
   r.requested_rank = opt.max_rank;
 
-  // Buffers are allocated once, the two largest with huge pages: fresh memory costs its page
-  // faults (1.3-3 ms per MB on the VMs measured, docs/benchmarks.md), a sizeable part of a pass.
+  // Few and small buffers, allocated once: fresh memory costs its page faults (1-6 ms per MB on
+  // the VMs measured, docs/benchmarks.md), a sizeable part of a pass. W^T is the passes' own
+  // float output (no double copy: the Gram matrix and the Ritz step convert it by blocks), and
+  // block i's B^T Q_i is also the next block's B X operand.
   const Index width = Index(max_blocks) * l;
-  PageMatrix<double> p_buf(n, width), ys_buf(m, width);
-  PageMatrix<float> z_buf(n, l), xf_buf(n, l);
-  auto& P = *p_buf;   // the orthonormal Krylov basis, l columns per block
-  auto& Ys = *ys_buf;  // B P, block by block (double: the stopping test and the Ritz step need it)
-  auto& Z = *z_buf;    // B^T Y, then its orthonormalised float copy Xf for B X
-  auto& Xf = *xf_buf;
-  MatrixXd G(width, width);  // Ys^T Ys, grown block by block
-  RowSketch sketch = make_row_sketch(size_t(m), l, opt);
-  r.sparse_start = sketch.sparse();
-  MatrixXf Y = sketch.sparse() ? MatrixXf() : std::move(sketch.G);
+  PageMatrix<double> q_buf(m, width);
+  PageMatrix<float> wt_buf(n, width);
+  auto& Q = *q_buf;    // the orthonormal Krylov basis, l columns per block
+  auto& Wt = *wt_buf;  // B^T Q, block by block
+  MatrixXd G(width, width);  // W W^T = Wt^T Wt in double, grown block by block
+  MatrixXf Y(m, l), Qf(m, l);
+  {
+    const Sketch sketch = make_column_sketch(size_t(n), l, opt);
+    r.sparse_start = sketch.sparse();
+    r.total_energy = 0;
+    column_sketch_product(B.data(), size_t(m), size_t(n), sketch, Y, &r.total_energy);  // B Pi, and ||B||_F^2
+  }
+  step();
   int blocks = 0;
   Index g_cols = 0;  // columns of G filled
   double last_err = -1;
-  auto grow_gram = [&](Index w) {  // G's columns [g_cols, w) from Ys
+  auto grow_gram = [&](Index w) {  // G's columns [g_cols, w) from Wt, in double by blocks of rows
     const Index add = w - g_cols;
-    G.block(0, g_cols, w, add).noalias() = Ys.leftCols(w).transpose() * Ys.middleCols(g_cols, add);
-    G.block(g_cols, 0, add, g_cols) = G.block(0, g_cols, g_cols, add).transpose();
+    MatrixXd rows, part = MatrixXd::Zero(w, add);
+    for (Index i = 0; i < n; i += 4096) {
+      rows = Wt.block(i, 0, std::min<Index>(4096, n - i), w).cast<double>();
+      part.noalias() += rows.transpose() * rows.rightCols(add);
+    }
+    G.block(0, g_cols, w, add) = part;
+    G.block(g_cols, 0, add, g_cols) = part.topRows(g_cols).transpose();
     g_cols = w;
   };
-  while (blocks < max_blocks) {
+  while (true) {
     const Index used = Index(blocks) * l, w = used + l;
-    // The first pass also sums ||B||_F^2 (no separate pass over B).
-    if (blocks == 0 && sketch.sparse()) {
-      r.total_energy = 0;
-      row_sketch_product(B.data(), size_t(n), sketch, Z, &r.total_energy);
-    }
-    else product_bt(B, Y, Z, blocks == 0 ? &r.total_energy : nullptr);  // n x l
+    auto X = Q.middleCols(used, l);
+    X = Y.cast<double>();
+    orthonormalize_against(Q, used, X);
+    Qf = X.cast<float>();
+    product_bt(B, Qf, Wt.middleCols(used, l));  // n x l
     step();
-    auto X = P.middleCols(used, l);
-    X = Z.cast<double>();
-    orthonormalize_against(P, used, X);
-    Xf = X.cast<float>();
-    product_b(B, Xf, Y);  // m x l
-    step();
-    Ys.middleCols(used, l) = Y.cast<double>();
     ++blocks;
-    if (blocks == max_blocks) break;
-    // Error-driven stop: the rank-C error of the current basis, from the eigenvalues of
-    // (B P)^T B P (in double: the residual is a small difference of large sums).
     grow_gram(w);
+    if (blocks == max_blocks) break;
+    // Error-driven stop: the rank-C error of the current basis, from the eigenvalues of W W^T
+    // (in double: the residual is a small difference of large sums).
     Eigen::SelfAdjointEigenSolver<MatrixXd> es(G.topLeftCorner(w, w), Eigen::EigenvaluesOnly);
     const Index c = std::min<Index>(opt.max_rank, w);
     const double kept = es.eigenvalues().tail(c).cwiseMax(0.0).sum();
     const double err = r.total_energy > 0 ? std::sqrt(std::max(0.0, r.total_energy - kept) / r.total_energy) : 0;
     if (blocks >= 2 && last_err - err <= k_krylov_stop * err) break;
     last_err = err;
+    // The next block's start, B B^T Q_i. B^T Q_i as it is (its columns' scales, ~ the singular
+    // values, do not cost float accuracy: each column of the product is its own sum), as the
+    // streamed SVD does; the block is made orthonormal, in double, after the product.
+    product_b(B, Wt.middleCols(used, l), Y);  // m x l
+    step();
   }
-  Y.resize(0, 0);
   const Index w = Index(blocks) * l;
   r.iterations = blocks;
-  // Ritz step, B ~ (B P) P^T: the SVD of B P = Ys. Fast path: from the eigenpairs of the Gram
-  // matrix G = Ys^T Ys = Vr S^2 Vr^T (mostly computed already for the stopping test), U = Ys Vr
-  // S^-1. Its round-off in U grows like u (s_1 / s_C)^2, so it is taken only while the smallest
-  // kept singular value is above 1e-4 s_1 (U orthonormal to ~1e-8); otherwise, and for
-  // rank-deficient data, the Householder QR of Ys (stable at any condition).
-  grow_gram(w);
-  {
-    Eigen::VectorXd lambda;
-    MatrixXd E;
-    top_eigenpairs(G.topLeftCorner(w, w), w, lambda, E);
-    int data_rank = 0;
-    bool reached = true;
-    const int rank = choose_rank(lambda, r.total_energy, opt, data_rank, reached);
-    if (lambda(0) > 0 && lambda(rank - 1) > 1e-8 * lambda(0)) {
-      r.data_rank_limit = data_rank, r.target_reached = reached;
-      r.S = lambda.head(rank).cwiseSqrt();
-      r.kept_energy = lambda.head(rank).sum();
-      const MatrixXd Vk = E.leftCols(rank);
-      r.U.resize(m, rank);
-      r.SxV.resize(n, rank);
-      rows_times(Ys.leftCols(w), Vk * r.S.cwiseInverse().asDiagonal(), r.U);
-      rows_times(P.leftCols(w), Vk * r.S.asDiagonal(), r.SxV);
-      if (opt.progress) opt.progress->finish();
-      return r;
-    }
-  }
-  G.resize(0, 0);
-  Eigen::HouseholderQR<MatrixXd> qr(Ys.leftCols(w));
-  const MatrixXd R = qr.matrixQR().topRows(w).triangularView<Eigen::Upper>();
-  Eigen::JacobiSVD<MatrixXd> svd(R, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  const Eigen::VectorXd lambda = svd.singularValues().array().square();
+  Eigen::VectorXd lambda;
+  MatrixXd E;
+  top_eigenpairs(G.topLeftCorner(w, w), w, lambda, E);
   const int rank = choose_rank(lambda, r.total_energy, opt, r.data_rank_limit, r.target_reached);
-  r.S = svd.singularValues().head(rank);
+  r.S = lambda.head(rank).cwiseSqrt();
   r.kept_energy = lambda.head(rank).sum();
-  MatrixXd Ur = MatrixXd::Zero(m, rank);
-  Ur.topRows(w) = svd.matrixU().leftCols(rank);
-  r.U = (qr.householderQ() * Ur).cast<float>();
-  r.SxV = (P.leftCols(w) * (svd.matrixV().leftCols(rank) * r.S.asDiagonal())).cast<float>();
+  const MatrixXd Ek = E.leftCols(rank);
+  r.U.resize(m, rank);
+  r.SxV.resize(n, rank);
+  rows_times(Q.leftCols(w), Ek, r.U);
+  rows_times(Wt.leftCols(w), Ek, r.SxV);
   if (opt.progress) opt.progress->finish();
   return r;
 }

@@ -11,10 +11,11 @@
 //    the same at every rank and less than a sketch of 1/8 of that side.
 //  - randomized, two schemes over the same passes (each pass over B is one float GEMM of width
 //    l = C + oversample through Eigen and OpenBLAS, multi-threaded; B is never copied):
-//    block_krylov (default): randomized block Krylov (Musco and Musco 2015), up to q + 1 blocks
-//    of l columns kept side by side, two passes per block, no final pass (svd.cpp, krylov_svd),
-//    stopping early once a block no longer improves the rank-C error; at most 2q + 2 passes,
-//    the first of them a sparse sign sketch (one add per element; SvdOptions::sparse_sketch).
+//    block_krylov (default): randomized block Krylov (Musco and Musco 2015) on the rows side, up
+//    to q + 1 blocks of l columns kept side by side, two passes per block, no final pass (svd.cpp,
+//    krylov_svd), stopping early once a block no longer improves the rank-C error; at most
+//    2q + 2 passes: a sparse sign sketch of B's columns (one add per element;
+//    SvdOptions::sparse_sketch), then q + 1 passes B^T Q and q passes B X.
 //    power: Halko, Martinsson, Tropp 2011, Alg. 4.4 with re-orthonormalised power iterations:
 //    sketch Y = B Omega, q power iterations, Q = orth(Y), then the small SVD of Q^T B; 2q + 2
 //    passes. The out-of-core path (codecs/fmf/ooc_svd.h) streams block Krylov on the rows side.
@@ -29,6 +30,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "core/progress.h"
 #include "core/sparse_sketch.h"
@@ -51,8 +53,9 @@ struct SvdOptions {
   uint64_t seed = 1;
   RandomizedScheme scheme = RandomizedScheme::block_krylov;
   // block_krylov: the first block from a sparse sign sketch (core/sparse_sketch.h) when B has at
-  // least 4 s rows (s = 4 l rounded up to 128, at least 256; l = rank + oversample <= 256): a
-  // pass at memory speed instead of a GEMM. false: a dense Gaussian test matrix.
+  // least 4 s columns (s = 4 l rounded up to 128, at least 256; l = rank + oversample <= 256): a
+  // pass at memory speed instead of a GEMM. false: a dense Gaussian test matrix. (The streamed
+  // SVD, ooc_svd.h, sketches B's rows by the same rule.)
   bool sparse_sketch = true;
   Progress* progress = nullptr;
 };
@@ -89,23 +92,28 @@ int choose_rank(const Eigen::VectorXd& lambda, double total, const SvdOptions& o
 // X := an orthonormal basis of X's columns that is orthogonal to the first `used` columns of P
 // (orthonormal), in double: block Gram-Schmidt and Cholesky QR, twice, Householder where a
 // round is ill-conditioned; columns that lie in span(P) to double precision are replaced by
-// pseudo-random ones (svd.cpp). The block step of both block Krylov SVDs (in core: the texel
-// side; streamed, ooc_svd.h: the rows side).
+// pseudo-random ones (svd.cpp). The block step of both block Krylov SVDs (both on the rows side).
 void orthonormalize_against(const Eigen::Ref<const Eigen::MatrixXd>& P, Eigen::Index used, Eigen::Ref<Eigen::MatrixXd> X);
 
-// Block Krylov's first test matrix on B's m rows (both block Krylov SVDs begin with B^T Omega):
-// Omega = S G, a sparse sign sketch S (m x s, two +-1 per row) and a Gaussian G (s x l), when
-// opt.sparse_sketch and m >= 4 s, s = 4 l rounded up to a multiple of 128, 256 <= s <= 1024;
-// else a dense Gaussian Omega (m x l) in G and S.s == 0. Deterministic for opt.seed.
-struct RowSketch {
+// Both block Krylov SVDs' first block (in core, svd.cpp; streamed, ooc_svd.h), on B's n columns:
+// Pi = S G, a sparse sign sketch S (n x s, one +-1 per column of B) and a Gaussian G (s x l),
+// when opt.sparse_sketch and n >= 4 s, s = 4 l rounded up to a multiple of 128, 256 <= s <= 1024;
+// else a dense Gaussian Pi (n x l) in G and S.s == 0. Deterministic for opt.seed.
+struct Sketch {
   SparseSign S;
   Eigen::MatrixXf G;
   bool sparse() const { return S.s > 0; }
 };
-RowSketch make_row_sketch(size_t m, Eigen::Index l, const SvdOptions& opt);
-// Z = B^T Omega (n x l, sized by the caller) for B m x n column-major; adds ||B||_F^2 (double, in
-// an order fixed by n, not by the thread count) to *energy when given.
-void row_sketch_product(const float* B, size_t n, const RowSketch& sketch, Eigen::Ref<Eigen::MatrixXf> Z, double* energy = nullptr);
+Sketch make_column_sketch(size_t n, Eigen::Index l, const SvdOptions& opt);
+// Y = B Pi (m x l, sized by the caller), setting *energy = ||B||_F^2 when given (B m x n
+// column-major). A chunk of B's columns, texels [first, first + n) of the sketch's, gives its
+// part of the sum. `scratch`, when given, holds the sketch's row blocks from call to call (fresh
+// pages cost more than the pass on some VMs).
+void column_sketch_product(const float* B, size_t m, size_t n, const Sketch& sketch, Eigen::Ref<Eigen::MatrixXf> Y,
+                           double* energy = nullptr, size_t first = 0, std::vector<float>* scratch = nullptr);
+// The scratch column_sketch_product takes for B m x n at l columns: at most 2 MiB and at most the
+// n l floats of a dense Pi (0 when dense: Pi itself is then n x l).
+size_t column_sketch_bytes(size_t m, size_t n, Eigen::Index l);
 
 // Block Krylov's error-driven stop: after at least two blocks, stop once a block improved the
 // rank-C error by at most this fraction of itself (the remaining gap to the optimum is then a

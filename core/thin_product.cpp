@@ -2,8 +2,11 @@
 #include "core/thin_product.h"
 
 #include <algorithm>
+#include <numeric>
 #include <cstdint>
 #include <omp.h>
+#include <memory>
+#include <mutex>
 #include <optional>
 #include <vector>
 
@@ -74,19 +77,31 @@ __attribute__((target("avx512f"))) double squares_avx512(const float* p, size_t 
   return s;
 }
 
-// Yr: `groups` blocks of m x L row-major (zero-padded columns); Zr: as many blocks of n x L
-// row-major. A tile of B's columns is multiplied by every group's block in turn, so B is read
-// from memory once and again from L1/L2 for the other groups. With `energy`, also ||B||_F^2:
-// each tile's columns are summed again right after the tile, from L2 (+4 % of the pass),
-// instead of in a separate pass over memory (which took half a pass's time). Tile and Tile1 are
-// the kernel for TJ columns and for one; Squares sums a column segment's squares.
+// One group of Y's (and Z's) columns: L of them, row-major, zero-padded, multiplied by a tile
+// kernel over TJ texel columns at a time (Tile1: one column).
 using TnTile = void (*)(const float*, size_t, const float*, size_t, size_t, size_t, float*, bool);
-template <int TJ, size_t L, TnTile Tile, TnTile Tile1, double (*Squares)(const float*, size_t)>
-void tn_driver(const float* B, size_t m, size_t n, const float* Yr, float* Zr, double* energy, size_t groups) {
-  constexpr size_t k_rows = 2048;   // a chunk of Y's rows: 2048 x L floats, in L2
-  // Texels per parallel task: whole tiles only. With 64, NV 2 (TJ 14) left 8 texels of every
-  // task to one-column tiles and ran at 275 GFLOP/s instead of 375 (l = 32, docs/benchmarks.md).
-  constexpr size_t k_texels = 8 * TJ;
+struct TnGroup {
+  TnTile tile, tile1;
+  size_t tj, L;
+};
+
+// Yr: one block of m x L row-major per group, side by side; Zr: as many blocks of n x L. A tile
+// of B's columns is multiplied by every group's block in turn, so B is read from memory once
+// and again from L1/L2 for the other groups (whose widths may differ: 40 columns as 24 + 16,
+// not padded to 48). With `energy`, also ||B||_F^2: each tile's columns are summed again right
+// after the tile, from L2 (+4 % of the pass), instead of in a separate pass over memory (which
+// took half a pass's time). Squares sums a column segment's squares.
+void tn_driver(const float* B, size_t m, size_t n, const std::vector<TnGroup>& groups, const float* Yr, float* Zr, double* energy,
+               double (*squares)(const float*, size_t)) {
+  constexpr size_t k_rows = 2048;  // a chunk of Y's rows: 2048 x L floats, in L2
+  // Texels per parallel task: whole tiles of every group. With 64, NV 2 (TJ 14) left 8 texels of
+  // every task to one-column tiles and ran at 275 GFLOP/s instead of 375 (l = 32,
+  // docs/benchmarks.md); one group takes 8 TJ.
+  size_t lcm = 1, max_tj = 1;
+  for (const TnGroup& g : groups) lcm = std::lcm(lcm, g.tj), max_tj = std::max(max_tj, g.tj);
+  const size_t k_texels = lcm * std::max<size_t>(1, 8 * max_tj / lcm);
+  std::vector<size_t> y_at(groups.size()), z_at(groups.size());  // each group's block
+  for (size_t g = 1; g < groups.size(); ++g) y_at[g] = y_at[g - 1] + m * groups[g - 1].L, z_at[g] = z_at[g - 1] + n * groups[g - 1].L;
   const int64_t tasks = int64_t((n + k_texels - 1) / k_texels);
   std::vector<double> part(energy ? size_t(tasks) : 0, 0.0);
 #pragma omp parallel for schedule(dynamic, 1)
@@ -95,15 +110,19 @@ void tn_driver(const float* B, size_t m, size_t n, const float* Yr, float* Zr, d
     double e = 0;
     for (size_t k0 = 0; k0 < m; k0 += k_rows) {
       const size_t k1 = std::min(m, k0 + k_rows);
-      size_t j = j0;
-      for (; j + TJ <= j1; j += TJ) {
-        for (size_t g = 0; g < groups; ++g) Tile(B, m, Yr + g * m * L, k0, k1, j, Zr + g * n * L, k0 == 0);
-        if (energy)
-          for (int t = 0; t < TJ; ++t) e += Squares(B + (j + t) * m + k0, k1 - k0);
-      }
-      for (; j < j1; ++j) {
-        for (size_t g = 0; g < groups; ++g) Tile1(B, m, Yr + g * m * L, k0, k1, j, Zr + g * n * L, k0 == 0);
-        if (energy) e += Squares(B + j * m + k0, k1 - k0);
+      for (size_t g = 0; g < groups.size(); ++g) {
+        const TnGroup& G = groups[g];
+        const bool sum = energy && g == 0;  // the squares of the first group's tile, from L1/L2
+        size_t j = j0;
+        for (; j + G.tj <= j1; j += G.tj) {
+          G.tile(B, m, Yr + y_at[g], k0, k1, j, Zr + z_at[g], k0 == 0);
+          if (sum)
+            for (size_t t = 0; t < G.tj; ++t) e += squares(B + (j + t) * m + k0, k1 - k0);
+        }
+        for (; j < j1; ++j) {
+          G.tile1(B, m, Yr + y_at[g], k0, k1, j, Zr + z_at[g], k0 == 0);
+          if (sum) e += squares(B + j * m + k0, k1 - k0);
+        }
       }
     }
     if (energy) part[size_t(s)] = e;
@@ -115,18 +134,20 @@ void tn_driver(const float* B, size_t m, size_t n, const float* Yr, float* Zr, d
 }
 
 template <int NV>
-void thin_tn(const float* B, size_t m, size_t n, const float* Yr, float* Zr, double* energy, size_t groups) {
+TnGroup tn_group_avx512() {
   constexpr int TJ = std::min(16, (31 - NV) / NV);  // TJ x NV accumulators + NV of Y + 1 broadcast <= 32 registers
-  tn_driver<TJ, 16 * NV, tn_tile_avx512<NV, TJ>, tn_tile_avx512<NV, 1>, squares_avx512>(B, m, n, Yr, Zr, energy, groups);
+  return {tn_tile_avx512<NV, TJ>, tn_tile_avx512<NV, 1>, size_t(TJ), size_t(16 * NV)};
 }
 
 // The same tiling for AVX2 (8 lanes, 16 registers: TJ x NV + NV + 1 <= 16), for l <= 32 in one
-// group (NV <= 4, TJ >= 2 texels per tile) and up to 96 in groups of 24 (tn_driver). Narrow
+// group (NV <= 4, TJ >= 2 texels per tile) and up to 96 in groups of 24 and one of the rest
+// (8 or 16 columns; tn_driver). Narrow
 // products are bound by reading B, which this kernel overlaps with its FMAs, where OpenBLAS
 // first packs B and then multiplies. At the UBO2003 size on a 2-core Zen 3 (a plain read of B:
 // 0.16-0.18 s), B^T Q took 0.23 / 0.35 / 0.64 / 0.68 / 1.03 / 1.39 s at l = 12 / 24 / 32 / 48 /
 // 64 / 96 against OpenBLAS's 0.55 / 0.70 / 0.81 / 1.00 / 1.23 / 1.65 s. One group of 40 or 48
-// (TJ 2 or 1) spilled or starved: 4-10 x slower than OpenBLAS (docs/benchmarks.md). The loops
+// (TJ 2 or 1) spilled or starved: 4-10 x slower than OpenBLAS (docs/benchmarks.md); 40 as
+// 24 + 16 took 0.67 s where two groups of 24 (40 padded to 48) took 0.84 s. The loops
 // are unrolled by pragma: without, GCC kept the accumulator array on the stack (a store per FMA).
 template <int NV, int TJ>
 __attribute__((target("avx2,fma"))) void tn_tile_avx2(const float* B, size_t ldb, const float* Yr, size_t k0, size_t k1, size_t j0,
@@ -158,9 +179,9 @@ __attribute__((target("avx2,fma"))) void tn_tile_avx2(const float* B, size_t ldb
 }
 
 template <int NV>
-void thin_tn_avx2(const float* B, size_t m, size_t n, const float* Yr, float* Zr, double* energy, size_t groups) {
+TnGroup tn_group_avx2() {
   constexpr int TJ = (15 - NV) / NV;  // 14, 6, 4, 2 texels per tile
-  tn_driver<TJ, 8 * NV, tn_tile_avx2<NV, TJ>, tn_tile_avx2<NV, 1>, block_squares>(B, m, n, Yr, Zr, energy, groups);
+  return {tn_tile_avx2<NV, TJ>, tn_tile_avx2<NV, 1>, size_t(TJ), size_t(8 * NV)};
 }
 
 // ---- Y = B X ---------------------------------------------------------------------------------
@@ -270,36 +291,81 @@ void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen:
 namespace {
 #ifdef BTFC_THIN_AVX512
 constexpr Index k_tn_avx2_max = 96;  // widest l for the AVX2 kernel (4 groups of 24)
-using TnFn = void (*)(const float*, size_t, size_t, const float*, float*, double*, size_t);
 
-// Z = B^T Y through a kernel on Y and Z in `groups` blocks of L columns (row-major, zero-padded,
-// in huge pages).
-void tn_padded(TnFn fn, Index L, Index groups, const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z,
-               double* energy) {
+// The staging copies of the last B^T Y, kept for the next (one buffer, process-wide, at most
+// 64 MiB): fresh pages cost 1-6 ms per MB on the VMs measured, and at the UBO2003 size faulting
+// the 16 MB of a product at l = 40 was a tenth of an in-core SVD's time (docs/benchmarks.md). A
+// call that finds the buffer in use (products on several threads) or too small allocates its
+// own; the larger one is kept.
+class Staging {
+ public:
+  explicit Staging(size_t count) {
+    {
+      std::unique_lock<std::mutex> lock(s_mutex, std::try_to_lock);
+      if (lock.owns_lock() && s_count >= count) m_p = std::move(s_p), m_count = s_count, s_count = 0;
+    }
+    if (!m_p) m_p.reset(static_cast<float*>(page_alloc(count * sizeof(float)))), m_count = count;
+  }
+  ~Staging() {
+    if (m_count * sizeof(float) > (size_t(64) << 20)) return;
+    std::unique_lock<std::mutex> lock(s_mutex, std::try_to_lock);
+    if (lock.owns_lock() && m_count > s_count) s_p = std::move(m_p), s_count = m_count;
+  }
+  Staging(const Staging&) = delete;
+  Staging& operator=(const Staging&) = delete;
+  float* data() { return m_p.get(); }
+
+ private:
+  std::unique_ptr<float, PageFree> m_p;
+  size_t m_count = 0;
+  static inline std::mutex s_mutex;
+  static inline std::unique_ptr<float, PageFree> s_p;
+  static inline size_t s_count = 0;
+};
+
+// Z = B^T Y through tn_driver on Y's columns in `groups` (widths summing to at least l; the
+// padding zero), copied row-major into huge pages.
+void tn_padded(const std::vector<TnGroup>& groups, double (*squares)(const float*, size_t), const float* B, size_t m, size_t n,
+               const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy) {
   const Index l = Y.cols();
-  PageBuffer<float> yr_buf(m * size_t(L * groups)), zr_buf(n * size_t(L * groups));
-  for (Index g = 0; g < groups; ++g) {
-    Eigen::Map<MatrixXfR> Yr(yr_buf.data() + size_t(g) * m * size_t(L), Index(m), L);
-    const Index c0 = g * L, w = std::min(L, l - c0);
+  size_t width = 0;
+  for (const TnGroup& g : groups) width += g.L;
+  Staging staging(m * width + n * width);
+  float* const yr = staging.data();
+  float* const zr = yr + m * width;
+  size_t y_at = 0, z_at = 0;
+  Index c0 = 0;
+  for (const TnGroup& g : groups) {
+    const Index L = Index(g.L), w = std::max<Index>(0, std::min(L, l - c0));
+    Eigen::Map<MatrixXfR> Yr(yr + y_at, Index(m), L);
     Yr.leftCols(w) = Y.middleCols(c0, w);
     Yr.rightCols(L - w).setZero();
+    y_at += m * g.L, c0 += L;
   }
-  fn(B, m, n, yr_buf.data(), zr_buf.data(), energy, size_t(groups));
-  for (Index g = 0; g < groups; ++g) {
-    Eigen::Map<const MatrixXfR> Zr(zr_buf.data() + size_t(g) * n * size_t(L), Index(n), L);
-    const Index c0 = g * L, w = std::min(L, l - c0);
+  tn_driver(B, m, n, groups, yr, zr, energy, squares);
+  c0 = 0;
+  for (const TnGroup& g : groups) {
+    const Index L = Index(g.L), w = std::max<Index>(0, std::min(L, l - c0));
+    Eigen::Map<const MatrixXfR> Zr(zr + z_at, Index(n), L);
     Z.middleCols(c0, w) = Zr.leftCols(w);
+    z_at += n * g.L, c0 += L;
   }
 }
 
 // The AVX2 kernel where it applies (AVX2 + FMA, l <= k_tn_avx2_max); false otherwise. Up to 32
-// columns in one group; wider, groups of 24 (NV 3, TJ 4: the widest tile that keeps 4 texels).
+// columns in one group; wider, groups of 24 (NV 3, TJ 4: the widest tile that keeps 4 texels)
+// and one of the remaining 8 or 16 (40 = 24 + 16: a fifth less work than two groups of 24).
 bool tn_avx2(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy) {
   const Index l = Y.cols(), nv = (l + 7) / 8;
   if (!cpu_has_avx2_fma() || l < 1 || l > k_tn_avx2_max || m < 1 || n < 1) return false;
-  static constexpr TnFn k_fns[4] = {thin_tn_avx2<1>, thin_tn_avx2<2>, thin_tn_avx2<3>, thin_tn_avx2<4>};
-  if (nv <= 4) tn_padded(k_fns[nv - 1], 8 * nv, 1, B, m, n, Y, Z, energy);
-  else tn_padded(thin_tn_avx2<3>, 24, (l + 23) / 24, B, m, n, Y, Z, energy);
+  const TnGroup k_groups[4] = {tn_group_avx2<1>(), tn_group_avx2<2>(), tn_group_avx2<3>(), tn_group_avx2<4>()};
+  std::vector<TnGroup> groups;
+  if (nv <= 4) groups.push_back(k_groups[nv - 1]);
+  else {
+    groups.assign(size_t(nv / 3), k_groups[2]);
+    if (nv % 3) groups.push_back(k_groups[nv % 3 - 1]);
+  }
+  tn_padded(groups, block_squares, B, m, n, Y, Z, energy);
   return true;
 }
 #endif
@@ -309,8 +375,9 @@ void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, 
 #ifdef BTFC_THIN_AVX512
   const Index nv = (Y.cols() + 15) / 16;
   if (cpu_has_avx512f() && nv >= 1 && nv <= 8 && m >= 1 && n >= 1) {
-    static constexpr TnFn k_fns[8] = {thin_tn<1>, thin_tn<2>, thin_tn<3>, thin_tn<4>, thin_tn<5>, thin_tn<6>, thin_tn<7>, thin_tn<8>};
-    tn_padded(k_fns[nv - 1], 16 * nv, 1, B, m, n, Y, Z, energy);
+    const TnGroup k_groups[8] = {tn_group_avx512<1>(), tn_group_avx512<2>(), tn_group_avx512<3>(), tn_group_avx512<4>(),
+                                 tn_group_avx512<5>(), tn_group_avx512<6>(), tn_group_avx512<7>(), tn_group_avx512<8>()};
+    tn_padded({k_groups[nv - 1]}, squares_avx512, B, m, n, Y, Z, energy);
     return;
   }
   if (tn_avx2(B, m, n, Y, Z, energy)) return;

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+#include <omp.h>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -56,7 +57,7 @@ double actual_rel_error(const std::vector<float>& b, size_t m, size_t n, const S
 }
 
 TEST(Svd, BlockKrylovIsWithinOnePercentOfEckartYoungInFewerPasses) {
-  // 600 rows: a dense Gaussian first block; 1500 rows (>= 4 x 256): the sparse sign sketch.
+  // 600 columns: a dense Gaussian first block; 1500 columns (>= 4 x 256): the sparse sign sketch.
   for (auto [m, n] : {std::pair<size_t, size_t>{600, 1500}, {1500, 600}}) {
   Eigen::VectorXd sigma;
   const std::vector<float> b = slow_decay_matrix(m, n, 7, sigma);
@@ -74,7 +75,7 @@ TEST(Svd, BlockKrylovIsWithinOnePercentOfEckartYoungInFewerPasses) {
     const double ek = actual_rel_error(b, m, n, *krylov), ep = actual_rel_error(b, m, n, *power);
     std::printf("%zu x %zu, rank %d: optimum %.6f, block Krylov %.6f (%d blocks, %s start), power iterations in as many passes %.6f\n",
                 m, n, C, optimum, ek, krylov->iterations, krylov->sparse_start ? "sparse" : "Gaussian", ep);
-    EXPECT_EQ(krylov->sparse_start, m >= 1024);
+    EXPECT_EQ(krylov->sparse_start, n >= 1024);
     EXPECT_GE(ek / optimum, 1 - 1e-4) << "cannot beat Eckart-Young";
     EXPECT_LE(ek / optimum, 1.01) << "rank " << C;
     EXPECT_LE(krylov->iterations, 5);
@@ -90,12 +91,12 @@ TEST(Svd, BlockKrylovIsWithinOnePercentOfEckartYoungInFewerPasses) {
   }
 }
 
-// The sparse start at the extremes (B tall enough for it: 1200 rows): zeros, a constant,
+// The sparse start at the extremes (B wide enough for it: 1200 columns): zeros, a constant,
 // rank-deficient data, and HDR rows spanning 1e-6 .. 1e6, against the exact SVD. The constant
 // matrix once came out as -B (error 2: its exhausted Krylov blocks re-entered the basis as
 // copies of the constant direction, orthonormalize_against).
 TEST(Svd, SparseStartHoldsAtTheExtremes) {
-  const size_t m = 1200, n = 300;
+  const size_t m = 300, n = 1200;
   std::mt19937_64 rng(21);
   std::normal_distribution<float> g(0.f, 1.f);
   std::vector<std::pair<const char*, std::vector<float>>> cases;
@@ -192,6 +193,41 @@ TEST(Svd, SparseSignSketchEqualsTheReference) {
   EXPECT_EQ(a.pick, b2.pick);
   EXPECT_EQ(a.negative, b2.negative);
   EXPECT_NE(a.negative, c.negative);
+}
+
+// The column sketch W = B S (the in-core Krylov's first block) on a block of rows of a taller
+// matrix, against the row sketch of that block's transpose, (S^T B^T)^T, from its reference (the
+// same sums in another order: to round-off); the same bits on one thread and on all; the energy
+// against squared_norm. Rows across the 2048-row tasks; one and two layers.
+TEST(Svd, ColumnSketchEqualsTheRowSketchOfTheTranspose) {
+  std::mt19937_64 rng(13);
+  std::uniform_real_distribution<float> u(-1.f, 1.f);
+  for (size_t n : {1, 15, 17, 257, 1000, 4099}) {
+    for (size_t m : {1, 7, 2049, 4500}) {
+      for (size_t s : {16, 256, 1024}) {
+        const size_t layers = s == 256 ? 2 : 1, ld = m + 5, top = 3;  // rows [top, top + m) of ld
+        std::vector<float> b(ld * n);
+        for (float& x : b) x = u(rng);
+        const SparseSign S = make_sparse_sign(n, s, 5, layers);
+        std::vector<float> w(m * s, -1.f), w1(m * s, -2.f), bt(n * m), wr(s * m), block(m * n);
+        double e = -1, e1 = -1, er = -1;
+        sparse_sign_columns(b.data() + top, ld, m, n, S, w.data(), &e);
+        const int threads = omp_get_max_threads();
+        omp_set_num_threads(1);
+        sparse_sign_columns(b.data() + top, ld, m, n, S, w1.data(), &e1);
+        omp_set_num_threads(threads);
+        ASSERT_EQ(0, std::memcmp(w.data(), w1.data(), w.size() * sizeof(float))) << n << " " << m << " " << s;
+        EXPECT_EQ(e, e1);
+        for (size_t j = 0; j < n; ++j)
+          for (size_t i = 0; i < m; ++i) bt[i * n + j] = block[j * m + i] = b[j * ld + top + i];
+        sparse_sign_product_reference(bt.data(), m, S, wr.data(), &er);
+        Eigen::Map<const Eigen::MatrixXf> W(w.data(), Eigen::Index(m), Eigen::Index(s)), Wr(wr.data(), Eigen::Index(s), Eigen::Index(m));
+        EXPECT_LT((W.cast<double>() - Wr.transpose().cast<double>()).cwiseAbs().maxCoeff(), 1e-6 * double(n)) << n << " " << m << " " << s;
+        const double total = squared_norm(block.data(), block.size());
+        EXPECT_NEAR(e, total, 1e-12 * total) << n << " " << m << " " << s;
+      }
+    }
+  }
 }
 
 TEST(Svd, BlockKrylovStopsEarlyOnAFastDecayAndHandlesExhaustedRanges) {

@@ -47,8 +47,9 @@ Result<StreamPlan> plan_streamed_fmf(const Params& p, const BtfDesc& desc, size_
   plan.bytes_per_value = k_stream_bytes_per_value + (plan.dfmf ? 4 : 0);
   // Randomized (block Krylov, ooc_svd.h), keeping k blocks of l (width w = k l), per channel: on
   // the rows the basis P (double) and, in the passes, the sum buffer (double), Q and B Z (float);
-  // on the texels W^T (w, float) and SxV or the Gaussian rows (l); the Gram matrices; 16 MiB for
-  // small matrices and stacks.
+  // on the texels W^T (w, float) and SxV or the first pass's test matrix (l: the dense Gaussian
+  // rows, or the sparse sketch's scratch, svd.h column_sketch_bytes, which is at most as large);
+  // the Gram matrices; 16 MiB for small matrices and stacks.
   auto randomized_bytes = [&](uint64_t k) {
     const uint64_t width = k * plan.l;
     return channels * (m * (8 * width + 16 * plan.l) + n * (width + plan.l) * 4 + width * width * 8 * 3) + base;

@@ -30,7 +30,7 @@ class Krylov {
     m_max_blocks = int(std::max<Index>(1, std::min<Index>(opt.power_iters + 1, std::min<Index>(Index(m), Index(n)) / m_l)));
     m_kept = kept_blocks > 0 ? std::min(kept_blocks, m_max_blocks) : m_max_blocks;
     m_width = Index(m_kept) * m_l;
-    m_sketch = make_row_sketch(m, m_l, opt);
+    m_sketch = make_column_sketch(n, m_l, opt);
   }
   int max_passes() const { return m_max_blocks + 1; }  // at most: the error-driven stop may end earlier
   Phase phase() const { return m_phase; }
@@ -48,18 +48,20 @@ class Krylov {
     }
   }
 
-  // Columns [o, o + k) of owned chunk c (count texels in all), B: m x k. Every pass sums its
-  // m x l block straight into `sums` (zeroed before the chunks, ooc_pass.h): no second m x l
-  // copy in double.
-  void slice(size_t c, size_t count, size_t o, const float* B, size_t k, double* sums) {
+  // Columns [o, o + k) of owned chunk c (count texels in all, the first of them texel `first`
+  // of B), B: m x k. Every pass sums its m x l block straight into `sums` (zeroed before the
+  // chunks, ooc_pass.h): no second m x l copy in double.
+  void slice(size_t c, size_t count, size_t first, size_t o, const float* B, size_t k, double* sums) {
     auto acc = Eigen::Map<MatrixXd>(sums, Index(m_m), m_l);
     switch (m_phase) {
-      case Phase::sketch:  // Y = B (B^T Omega): B^T Omega through the sparse sign sketch ~ a read
-        m_z.resize(Index(k), m_l);
-        row_sketch_product(B, k, m_sketch, m_z, &m_energy);
-        thin_product(B, m_m, k, m_z, m_y);
+      case Phase::sketch: {  // Y = B Pi: the chunk's part, through the sparse sign sketch ~ a read
+        double e = 0;
+        m_y.resize(Index(m_m), m_l);
+        column_sketch_product(B, m_m, k, m_sketch, m_y, &e, first + o, &m_scratch);
+        m_energy += e;
         add_into(acc, m_y);
         break;
+      }
       case Phase::power: {  // Y = B B^T Q_b; Z = B^T Q_b is block b of W^T, kept
         auto Z = wt_block(c, count, Index(m_in_p - 1) * m_l).middleRows(Index(o), Index(k));
         transposed_product(B, m_m, k, m_q, Z);
@@ -91,7 +93,8 @@ class Krylov {
     const auto Y = Eigen::Map<const MatrixXd>(sums, Index(m_m), m_l);
     if (m_phase == Phase::sketch) {
       m_energy = sums[m_m * size_t(m_l)];
-      m_sketch = RowSketch{};
+      m_sketch = Sketch{};
+      std::vector<float>().swap(m_scratch);
       m_P.resize(Index(m_m), m_width);
       m_P.leftCols(m_l) = Y;
       orthonormalize_against(m_P, 0, m_P.leftCols(m_l));
@@ -179,10 +182,11 @@ class Krylov {
   Index m_l, m_width = 0, m_w = 0;
   int m_max_blocks = 1, m_kept = 1, m_blocks = 0, m_in_p = 0;
   Phase m_phase = Phase::sketch;
-  RowSketch m_sketch;
+  Sketch m_sketch;  // on the texels
+  std::vector<float> m_scratch;  // the sketch's row blocks
   double m_energy = 0, m_last_err = -1;
   MatrixXd m_P, m_K, m_G;  // the basis (m x kept l), its Gram matrix P^T B B^T P, W W^T
-  MatrixXf m_q, m_z, m_y;
+  MatrixXf m_q, m_y;
   std::vector<MatrixXf> m_wt;
 };
 
@@ -240,14 +244,14 @@ Result<std::vector<SvdResult>> streaming_svds(const ChunkSource& src, const std:
     auto fn = [&](size_t c, const float* B, size_t k) {
       double* sums = run.sums().data();
       if (!split) {
-        for (size_t a = 0; a < active.size(); ++a) ks[active[a]].slice(c, k, 0, B, k, sums + off[a]);
+        for (size_t a = 0; a < active.size(); ++a) ks[active[a]].slice(c, k, src.chunk_first(c), 0, B, k, sums + off[a]);
       } else {
         // Split a part, then every unfinished channel's products on it while it is near the cache.
         for (size_t o = 0; o < k; o += part) {
           const size_t h = std::min(part, k - o);
           for (size_t i = 0; i < channels; ++i) outs[i] = parts.data() + i * m * h;
           split->split(c, o, B + o * src.rows(), h, outs.data());
-          for (size_t a = 0; a < active.size(); ++a) ks[active[a]].slice(c, k, o, outs[active[a]], h, sums + off[a]);
+          for (size_t a = 0; a < active.size(); ++a) ks[active[a]].slice(c, k, src.chunk_first(c), o, outs[active[a]], h, sums + off[a]);
         }
       }
       for (size_t i : active) ks[i].end_chunk(c);

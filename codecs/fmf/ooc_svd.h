@@ -5,9 +5,9 @@
 // Randomized (streaming_svd; streaming_svds runs several from one stream): randomized block
 // Krylov (Musco and Musco 2015) on the rows side, arranged so that every pass reads B exactly
 // once and does at most two products per chunk:
-//   pass 0        Y = B (B^T Omega), ||B||_F^2   (Omega on the rows, m x l, l = C + p: the in-core
-//                 path's first test matrix, svd.h make_row_sketch, a sparse sign sketch S times a
-//                 Gaussian, so B^T Omega costs ~ a read and the pass one GEMM); Q_1 = orth(Y)
+//   pass 0        Y = B Pi, ||B||_F^2   (Pi on the texels, n x l, l = C + p: the in-core path's
+//                 first test matrix, svd.h make_column_sketch, a sparse sign sketch S times a
+//                 Gaussian, so the pass costs ~ a read: each chunk adds B_c S_c G); Q_1 = orth(Y)
 //   pass b        Y = B Z with Z = B^T Q_b (per chunk, while it is in memory); Z is kept: it is
 //                 block b of W^T = B^T P. Q_{b+1} = orth(Y) against the kept blocks (svd.h,
 //                 orthonormalize_against), P = [Q_1 .. Q_{b+1}] (m x (b + 1) l, double)
@@ -19,9 +19,10 @@
 // error of that basis, and once a block gains at most k_krylov_stop of it the basis takes
 // Q_{b+1} (free) and the last pass follows. Under a tight memory limit P holds only kept_blocks
 // blocks: when full, it restarts from its best (kept - 1) l Ritz vectors P E (and W^T from W^T E),
-// then adds the next block (kept 1: the power iterations). The in-core path runs the same
-// iteration on the texel side; tests/ooc_test.cpp checks both against each other and against
-// the exact SVD.
+// then adds the next block (kept 1: the power iterations). The in-core path (svd.cpp) runs the
+// same iteration from the same Pi, so with every block kept both build the same basis (the same
+// error to float rounding); tests/ooc_test.cpp checks both against each other and against the
+// exact SVD.
 //
 // Exact (streaming_exact_svd, ooc_exact.cpp): the in-core exact path's rows-side Gram method in
 // two passes: pass 1 G = sum_c B_c B_c^T (m x m, double) and ||B||_F^2, then G = E Lambda E^T
@@ -30,7 +31,7 @@
 // (few directions, any number of texels). The in-core path's other side (B^T B when texels < m)
 // is not streamed: it would need every pair of chunks at once.
 //
-// Omega depends on the seed and m only, so the result does not depend on how chunks are spread
+// Pi depends on the seed and n only, so the result does not depend on how chunks are spread
 // over processes. Every pass ends with one collective
 // sum over processes (Collective::allreduce_sum) of the m x l (or l x l, or G's lower triangle)
 // matrix plus one error flag: a process that fails to read or decode a chunk still joins the
