@@ -57,7 +57,7 @@ bool sparse_sign_product_avx2(const float* B, size_t n, const SparseSign& S, flo
 // dimension ldb >= m (a block of a taller matrix's rows) holding texels [first, first + n) of
 // the S.m that S was made for (make_sparse_sign(S.m, s, ...): texel j's bucket and sign as row
 // j's above; n < 2^30), W m x s column-major (so the sums over chunks of texels add up to the
-// whole matrix's). Parallel over blocks of 2048 rows; within one, bucket by bucket, each bucket's
+// whole matrix's). Parallel over blocks of 2048 rows and ranges of 16 buckets; bucket by bucket, each bucket's
 // texels added (or subtracted) into a sum held in L1 while their pieces of B stream from memory:
 // a pass at about the speed of reading B with one layer (each layer reads B once more). Each
 // bucket sums its texels in texel order (layer by layer within a texel), so the result does not
