@@ -167,8 +167,11 @@ size_t find_non_finite(const float* d, size_t n) {
   int64_t first = int64_t(blocks);
 #pragma omp parallel for reduction(min : first) schedule(static) if (blocks > 16)
   for (int64_t b = 0; b < int64_t(blocks); ++b) {
+    // The bound hoisted: with std::min in the loop condition GCC kept the loop scalar (0.47 s
+    // against 0.15 s over a UBO2003-size BTF on 2 cores, one pass of every fmf encode).
+    const size_t i0 = size_t(b) * block, i1 = std::min(n, i0 + block);
     uint32_t bad = 0;
-    for (size_t i = size_t(b) * block; i < std::min(n, size_t(b + 1) * block); ++i) {
+    for (size_t i = i0; i < i1; ++i) {
       uint32_t bits;
       std::memcpy(&bits, d + i, 4);
       bad |= uint32_t((bits & 0x7f800000u) == 0x7f800000u);

@@ -1,11 +1,13 @@
 // Truncated SVD for fmf; see svd.h for the contract and the choice of paths.
 #include "core/svd.h"
 
+#include "core/blas_env.h"
 #include "core/memory.h"
 #include "core/sparse_sketch.h"
 #include "core/thin_product.h"
 
 #include <Eigen/Dense>
+#include <omp.h>
 #include <algorithm>
 #include <climits>
 #include <cmath>
@@ -13,6 +15,7 @@
 #include <cstring>
 #include <list>
 #include <mutex>
+#include <optional>
 #include <random>
 #include <vector>
 
@@ -445,6 +448,13 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
   SvdResult r;
   r.method = "randomized";
   r.requested_rank = opt.max_rank;
+  // The passes run btfc's OpenMP kernels; OpenBLAS's own pool, woken by the small products in
+  // between (the orthonormalisation, the Ritz step), would spin (sched_yield) against them for the
+  // 2 cores: 3.04-3.37 s against 2.80-2.89 s for the streamed SVD, which holds one BLAS thread
+  // (ooc_svd.cpp), at rank 32 q 1 at UBO2003 size. Not from inside a parallel region: the setting
+  // is process-wide.
+  std::optional<SingleThreadedBlas> one_blas_thread;
+  if (!omp_in_parallel()) one_blas_thread.emplace();
 
   // Few and small buffers, allocated once: fresh memory costs its page faults (1-6 ms per MB on
   // the VMs measured, docs/benchmarks.md), a sizeable part of a pass. W^T is the passes' own
@@ -468,12 +478,22 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
   Index g_cols = 0;  // columns of G filled
   double last_err = -1;
   auto grow_gram = [&](Index w) {  // G's columns [g_cols, w) from Wt, in double by blocks of rows
-    const Index add = w - g_cols;
-    MatrixXd rows, part = MatrixXd::Zero(w, add);
-    for (Index i = 0; i < n; i += 4096) {
-      rows = Wt.block(i, 0, std::min<Index>(4096, n - i), w).cast<double>();
-      part.noalias() += rows.transpose() * rows.rightCols(add);
+    const Index add = w - g_cols, blocks_of_rows = (n + 4095) / 4096, groups = std::min<Index>(blocks_of_rows, 16);
+    // Groups of row blocks on the OpenMP threads (BLAS has one), each group summing its blocks in
+    // order, the groups summed in order after: the same bits at any thread count.
+    std::vector<MatrixXd> parts(static_cast<size_t>(groups));
+#pragma omp parallel for schedule(static) if (groups > 1)
+    for (Index g = 0; g < groups; ++g) {
+      MatrixXd rows, sum = MatrixXd::Zero(w, add);
+      for (Index b = blocks_of_rows * g / groups; b < blocks_of_rows * (g + 1) / groups; ++b) {
+        const Index i = b * 4096;
+        rows = Wt.block(i, 0, std::min<Index>(4096, n - i), w).cast<double>();
+        sum.noalias() += rows.transpose() * rows.rightCols(add);
+      }
+      parts[size_t(g)] = std::move(sum);
     }
+    MatrixXd part = MatrixXd::Zero(w, add);
+    for (const MatrixXd& p : parts) part += p;
     G.block(0, g_cols, w, add) = part;
     G.block(g_cols, 0, add, g_cols) = part.topRows(g_cols).transpose();
     g_cols = w;

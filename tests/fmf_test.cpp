@@ -7,6 +7,7 @@
 #include <random>
 
 #include "codecs/codec.h"
+#include "codecs/fmf/fmf.h"
 #include "core/interp.h"
 
 using namespace btfc;
@@ -235,13 +236,23 @@ TEST(Fmf, HdrRangeSurvivesHalfStorage) {
 }
 
 TEST(Fmf, NonFiniteInputIsAnError) {
-  Btf b = random_btf(make_desc(4, 4, 2, 2), 2, 0.5, 0.0, 0.0, 9);
-  b.data()[17] = NAN;
-  auto r = resolve_spec("fmf");
-  Context ctx;
-  auto m = r->first->encode(b, r->second, ctx);
-  ASSERT_FALSE(m.ok());
-  EXPECT_NE(m.status().message().find("non-finite"), std::string::npos);
+  // color=dfmf with the automatic offset checks on its moments pass (fmf.cpp), the others first.
+  for (const char* spec : {"fmf", "fmf:color=dfmf", "fmf:color=dfmf:offset=0.5"})
+    for (float bad : {NAN, INFINITY, -INFINITY})
+      for (size_t at : {size_t(0), size_t(17), size_t(4 * 4 * 2 * 2 * 3 - 1)}) {
+        Btf b = random_btf(make_desc(4, 4, 2, 2), 2, 0.5, 0.0, 0.0, 9);
+        b.data()[at] = bad;
+        auto r = resolve_spec(spec);
+        Context ctx;
+        auto m = r->first->encode(b, r->second, ctx);
+        ASSERT_FALSE(m.ok()) << spec << " " << bad << " at " << at;
+        EXPECT_NE(m.status().message().find("non-finite"), std::string::npos) << m.status().message();
+      }
+  // The flag the dfmf check rides on: set by a NaN or inf value, not by finite extremes.
+  const float big = 3.4e38f, tiny = 1e-38f, vals[2][6] = {{big, big, big, tiny, 0.f, -big}, {1.f, NAN, 1.f, 1.f, 1.f, 1.f}};
+  double sy = 0, sy2 = 0;
+  EXPECT_FALSE(dfmf_luminance_moments(vals[0], 2, &sy, &sy2));
+  EXPECT_TRUE(dfmf_luminance_moments(vals[1], 2, &sy, &sy2));
 }
 
 TEST(Fmf, DfmfFullRankRoundTrip) {

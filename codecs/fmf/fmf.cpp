@@ -129,7 +129,9 @@ class FmfCodec final : public Codec {
     const BtfDesc& d = btf.desc();
     const Config cfg = config_from(p);
     if (cfg.dfmf && d.channels != 3) return invalid_argument("fmf: color=dfmf needs 3 channels, the BTF has " + std::to_string(d.channels));
-    BTFC_RETURN_IF_ERROR(btf.check_finite("fmf input"));
+    // color=dfmf's automatic offset reads every value anyway: the input check rides on that pass.
+    const bool auto_offset = cfg.dfmf && p.get_real("offset") <= 0;
+    if (!auto_offset) BTFC_RETURN_IF_ERROR(btf.check_finite("fmf input"));
     const auto t0 = std::chrono::steady_clock::now();
     SvdOptions opt;
     opt.target_rel_error = p.get_real("target_error");
@@ -161,10 +163,12 @@ class FmfCodec final : public Codec {
     } else {
       const size_t rows = d.num_images(), n = d.num_texels();
       double e = p.get_real("offset");
-      if (e <= 0) {
+      if (auto_offset) {
         double sy = 0, sy2 = 0;
-#pragma omp parallel for reduction(+ : sy, sy2) schedule(static)
-        for (size_t t = 0; t < n; ++t) dfmf_luminance_moments(btf.abrdf(t), rows, &sy, &sy2);
+        int bad = 0;
+#pragma omp parallel for reduction(+ : sy, sy2) reduction(| : bad) schedule(static)
+        for (size_t t = 0; t < n; ++t) bad |= int(dfmf_luminance_moments(btf.abrdf(t), rows, &sy, &sy2));
+        if (bad) BTFC_RETURN_IF_ERROR(btf.check_finite("fmf input"));  // names the value (or finds none: an overflowed sum)
         e = dfmf_auto_offset(sy, sy2);
       }
       BTFC_ASSIGN_OR_RETURN(rp, dfmf_with_offset(p, e));

@@ -129,8 +129,11 @@ size_t dfmf_channel(const float* abrdf, size_t rows, int k, float offset, float*
 size_t dfmf_channels(const float* abrdf, size_t rows, float offset, float* y, float* u, float* v);
 // The automatic offset (offset=0): adds one texel's sum of Y and of Y^2 (Y clamped to >= 0) to
 // *sum_y, *sum_y2; dfmf_auto_offset turns the BTF's sums into e = sum Y^2 / sum Y (1e-5 when
-// that is smaller or undefined). The streamed encode sums the same way over its chunks.
-void dfmf_luminance_moments(const float* abrdf, size_t rows, double* sum_y, double* sum_y2);
+// that is smaller or undefined). The streamed encode sums the same way over its chunks. Returns
+// true when a luminance was NaN or inf: whenever a value is (Btf::check_finite then names it: the
+// in-core encode's input check rides on this pass), and for finite values only if their weighted
+// sum rounds past the largest float (the Y weights are positive and sum to 1).
+bool dfmf_luminance_moments(const float* abrdf, size_t rows, double* sum_y, double* sum_y2);
 double dfmf_auto_offset(double sum_y, double sum_y2);
 // `p` (a color=dfmf fmf spec) with offset = `offset`: the spec a model of that offset carries.
 Result<Params> dfmf_with_offset(const Params& p, double offset);
