@@ -478,16 +478,18 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
   Index g_cols = 0;  // columns of G filled
   double last_err = -1;
   auto grow_gram = [&](Index w) {  // G's columns [g_cols, w) from Wt, in double by blocks of rows
-    const Index add = w - g_cols, blocks_of_rows = (n + 4095) / 4096, groups = std::min<Index>(blocks_of_rows, 16);
-    // Groups of row blocks on the OpenMP threads (BLAS has one), each group summing its blocks in
-    // order, the groups summed in order after: the same bits at any thread count.
+    // Blocks of rows of at most ~4 MB in double (4096 rows up to w = 128), in at most 16 groups on
+    // the OpenMP threads (BLAS has one), each group summing its blocks in order, the groups summed
+    // in order after: the same bits at any thread count.
+    const Index rows_per = std::clamp<Index>((Index(1) << 19) / std::max<Index>(1, w), 256, 4096);
+    const Index add = w - g_cols, blocks_of_rows = (n + rows_per - 1) / rows_per, groups = std::min<Index>(blocks_of_rows, 16);
     std::vector<MatrixXd> parts(static_cast<size_t>(groups));
 #pragma omp parallel for schedule(static) if (groups > 1)
     for (Index g = 0; g < groups; ++g) {
       MatrixXd rows, sum = MatrixXd::Zero(w, add);
       for (Index b = blocks_of_rows * g / groups; b < blocks_of_rows * (g + 1) / groups; ++b) {
-        const Index i = b * 4096;
-        rows = Wt.block(i, 0, std::min<Index>(4096, n - i), w).cast<double>();
+        const Index i = b * rows_per;
+        rows = Wt.block(i, 0, std::min<Index>(rows_per, n - i), w).cast<double>();
         sum.noalias() += rows.transpose() * rows.rightCols(add);
       }
       parts[size_t(g)] = std::move(sum);
