@@ -3,7 +3,8 @@
 //   read    ||B||_F^2 (squared_norm: one read of B, the memory bound of a pass)
 //   B X     thin_product (m x l)          and OpenBLAS on slices of rows
 //   B^T Q   transposed_product (n x l)    and OpenBLAS on slices of texels
-// and, once, the first pass's sparse sign sketches of B's rows (S^T B) and of its columns (B S).
+// and, once, the first pass's sparse sign sketches of B's rows (S^T B) and of its columns (B S),
+// and the in-core SVD's whole first pass (B S G at l = 40).
 // (OpenBLAS as btfc's fallback runs it: through Eigen, on 2 x threads OpenMP slices with one BLAS
 // thread each; one OpenBLAS call on its own threads was 1.5-5 x slower at these widths.)
 // with GFLOP/s (2 m n l per product). B is a --dump file of bench_fmf (the UBO2003 size: 19683 x
@@ -27,6 +28,7 @@
 #include "core/cpu_dispatch.h"
 #include "core/memory.h"
 #include "core/sparse_sketch.h"
+#include "core/svd.h"
 #include "core/thin_product.h"
 
 using namespace btfc;
@@ -90,6 +92,15 @@ int main(int argc, char** argv) {
     const double t_cols1 = best_of(3, [&] { sparse_sign_columns(buf.data(), m, m, n, cols_1, wc.data(), &e); });
     std::printf("sparse sign sketches (s = %zu, with ||B||^2): rows S^T B %.3f s, columns B S %.3f s (one per column: %.3f s)%s\n", sk,
                 t_rows, t_cols, t_cols1, e < 0 ? " " : "");
+    // The first pass as the in-core block Krylov SVD runs it (svd.h column_sketch_product: B S by
+    // blocks of rows, then times the Gaussian G), at fmf's rank 32 + oversample 8.
+    SvdOptions o;
+    o.seed = 1;
+    const Sketch first = make_column_sketch(n, 40, o);
+    Eigen::MatrixXf Y(Eigen::Index(m), 40);
+    std::vector<float> scratch;
+    const double t_first = best_of(3, [&] { column_sketch_product(buf.data(), m, n, first, Y, &e, 0, &scratch); });
+    std::printf("first pass Y = B S G (l = 40, s = %zu, %s, with ||B||^2): %.3f s\n", first.S.s, first.sparse() ? "sparse" : "dense", t_first);
   }
   std::printf("%4s %8s | %8s %6s %8s %6s | %8s %6s %8s %6s\n", "l", "read s", "B X s", "GF/s", "OpenBLAS", "GF/s", "B^T Q s", "GF/s",
               "OpenBLAS", "GF/s");

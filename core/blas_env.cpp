@@ -1,5 +1,6 @@
 #include "core/blas_env.h"
 
+#include <omp.h>
 #include <unistd.h>
 
 #include <cstdlib>
@@ -13,10 +14,13 @@ void openblas_set_num_threads(int);
 
 namespace btfc {
 
-SingleThreadedBlas::SingleThreadedBlas() {
+SingleThreadedBlas::SingleThreadedBlas(bool when) {
 #if defined(BTFC_HAVE_OPENBLAS)
+  if (!when || omp_in_parallel()) return;  // saved_ stays 0: nothing to restore
   saved_ = openblas_get_num_threads();
   if (saved_ > 1) openblas_set_num_threads(1);
+#else
+  (void)when;
 #endif
 }
 

@@ -13,11 +13,14 @@ void reexec_for_openblas(int argc, char** argv);
 // an OpenMP parallel region still hands work to its own thread pool, whose threads then spin
 // (sched_yield) against the OpenMP threads for the same 2 cores. Measured on lpca's per-cluster
 // PCA steps (128^2 texels, load ~9): 2.2x slower than with one BLAS thread per caller. Hold one of
-// these around parallel regions whose threads call BLAS. Process-wide (OpenBLAS has one
-// setting), restored on destruction; a no-op without OpenBLAS.
+// these around parallel regions whose threads call BLAS, or around a run of OpenMP kernels with
+// small BLAS calls in between (whose pool would wake and spin against the kernels). Process-wide
+// (OpenBLAS has one setting), restored on destruction; a no-op without OpenBLAS, when `when` is
+// false (a caller that only sometimes opens a parallel region) and inside a parallel region
+// (another thread's holder would race on the one setting).
 class SingleThreadedBlas {
  public:
-  SingleThreadedBlas();
+  explicit SingleThreadedBlas(bool when = true);
   ~SingleThreadedBlas();
   SingleThreadedBlas(const SingleThreadedBlas&) = delete;
   SingleThreadedBlas& operator=(const SingleThreadedBlas&) = delete;

@@ -57,9 +57,12 @@ bool sparse_sign_product_avx2(const float* B, size_t n, const SparseSign& S, flo
 // dimension ldb >= m (a block of a taller matrix's rows) holding texels [first, first + n) of
 // the S.m that S was made for (make_sparse_sign(S.m, s, ...): texel j's bucket and sign as row
 // j's above; n < 2^30), W m x s column-major (so the sums over chunks of texels add up to the
-// whole matrix's). Parallel over blocks of 2048 rows and ranges of 16 buckets; bucket by bucket, each bucket's
-// texels added (or subtracted) into a sum held in L1 while their pieces of B stream from memory:
-// a pass at about the speed of reading B with one layer (each layer reads B once more). Each
+// whole matrix's). From 4096 rows on, in texel order: parallel over chunks of 2048 rows, each
+// streaming B's texels in storage order into its rows of the s sums (held in L2 / L3). Below,
+// in bucket order: parallel over blocks of 2048 rows and ranges of 16 buckets; bucket by bucket,
+// each bucket's texels added (or subtracted) into a sum held in L1 while their pieces of B come
+// from memory. A pass at about the speed of reading B with one layer (each layer reads B once
+// more). W has the same bits in either order. Each
 // bucket sums its texels in texel order (layer by layer within a texel), so the result does not
 // depend on the thread count. With `energy`, also *energy = ||B||_F^2 in double. The first block
 // of the in-core block Krylov SVD (core/svd.cpp).

@@ -15,7 +15,6 @@
 #include <cstring>
 #include <list>
 #include <mutex>
-#include <optional>
 #include <random>
 #include <vector>
 
@@ -284,12 +283,15 @@ bool cholesky_qr_round(Eigen::Ref<MatrixXd> X) {
 namespace {
 size_t sketch_buckets(Index l) { return (std::max<size_t>(4 * size_t(l), 256) + 127) / 128 * 128; }
 bool sketch_sparse(size_t n, size_t s) { return s <= 1024 && n >= 4 * s && n < (size_t(1) << 30); }
-// Rows of B per block of column_sketch_product: its scratch holds rows x s floats, at most 2 MiB
+// Rows of B per block of column_sketch_product: its scratch holds rows x s floats, at most 16 MiB
 // and at most n l floats (what a dense Pi would take; the out-of-core plans count that), 16 rows
-// at least: 2048 rows at the UBO2003 size (n = 65536, s = 256).
+// at least. Blocks of 4096 rows or more let sparse_sign_columns stream B in texel order, by
+// chunks of 2048 rows: a multiple of 4096 rows keeps two threads evenly busy (8192 rows at the
+// UBO2003 size, n = 65536, l = 40, s = 256: 0.30-0.32 s for the pass against 0.35-0.36 s with
+// 10240 and 0.46 s in 2048-row blocks in bucket order, bench_products).
 size_t sketch_rows(size_t m, size_t n, Index l, size_t s) {
-  const size_t floats = std::min<size_t>(size_t(1) << 19, n * size_t(l));
-  return std::min(m, std::clamp<size_t>(floats / s, 16, 2048));
+  const size_t floats = std::min<size_t>(size_t(1) << 22, n * size_t(l)), rows = std::max<size_t>(floats / s, 16);
+  return std::min(m, rows >= 4096 ? rows / 4096 * 4096 : rows);
 }
 }  // namespace
 
@@ -331,6 +333,29 @@ void column_sketch_product(const float* B, size_t m, size_t n, const Sketch& ske
     if (energy) *energy += e;  // in block order: independent of the thread count
     Y.middleRows(Index(i0), Index(h)).noalias() = Eigen::Map<const MatrixXf>(w.data(), Index(h), Index(s)) * sketch.G;
   }
+}
+
+MatrixXd gram_columns(const Eigen::Ref<const MatrixXf>& Wt, Index from) {
+  // Blocks of rows of at most ~4 MB in double (4096 rows up to w = 128), in at most 16 groups on
+  // the OpenMP threads (BLAS has one where the SVDs call this), each group summing its blocks in
+  // order, the groups summed in order after: the same bits at any thread count.
+  const Index n = Wt.rows(), w = Wt.cols(), add = w - from;
+  const Index rows_per = std::clamp<Index>((Index(1) << 19) / std::max<Index>(1, w), 256, 4096);
+  const Index blocks_of_rows = (n + rows_per - 1) / rows_per, groups = std::min<Index>(blocks_of_rows, 16);
+  std::vector<MatrixXd> parts(static_cast<size_t>(groups));
+#pragma omp parallel for schedule(static) if (groups > 1)
+  for (Index g = 0; g < groups; ++g) {
+    MatrixXd rows, sum = MatrixXd::Zero(w, add);
+    for (Index b = blocks_of_rows * g / groups; b < blocks_of_rows * (g + 1) / groups; ++b) {
+      const Index i = b * rows_per;
+      rows = Wt.middleRows(i, std::min<Index>(rows_per, n - i)).cast<double>();
+      sum.noalias() += rows.transpose() * rows.rightCols(add);
+    }
+    parts[size_t(g)] = std::move(sum);
+  }
+  MatrixXd part = MatrixXd::Zero(w, add);
+  for (const MatrixXd& p : parts) part += p;
+  return part;
 }
 
 // X := an orthonormal basis of X's columns orthogonal to P's: block classical Gram-Schmidt and
@@ -451,10 +476,8 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
   // The passes run btfc's OpenMP kernels; OpenBLAS's own pool, woken by the small products in
   // between (the orthonormalisation, the Ritz step), would spin (sched_yield) against them for the
   // 2 cores: 3.04-3.37 s against 2.80-2.89 s for the streamed SVD, which holds one BLAS thread
-  // (ooc_svd.cpp), at rank 32 q 1 at UBO2003 size. Not from inside a parallel region: the setting
-  // is process-wide.
-  std::optional<SingleThreadedBlas> one_blas_thread;
-  if (!omp_in_parallel()) one_blas_thread.emplace();
+  // (ooc_svd.cpp), at rank 32 q 1 at UBO2003 size.
+  const SingleThreadedBlas one_blas_thread;
 
   // Few and small buffers, allocated once: fresh memory costs its page faults (1-6 ms per MB on
   // the VMs measured, docs/benchmarks.md), a sizeable part of a pass. W^T is the passes' own
@@ -477,27 +500,10 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
   int blocks = 0;
   Index g_cols = 0;  // columns of G filled
   double last_err = -1;
-  auto grow_gram = [&](Index w) {  // G's columns [g_cols, w) from Wt, in double by blocks of rows
-    // Blocks of rows of at most ~4 MB in double (4096 rows up to w = 128), in at most 16 groups on
-    // the OpenMP threads (BLAS has one), each group summing its blocks in order, the groups summed
-    // in order after: the same bits at any thread count.
-    const Index rows_per = std::clamp<Index>((Index(1) << 19) / std::max<Index>(1, w), 256, 4096);
-    const Index add = w - g_cols, blocks_of_rows = (n + rows_per - 1) / rows_per, groups = std::min<Index>(blocks_of_rows, 16);
-    std::vector<MatrixXd> parts(static_cast<size_t>(groups));
-#pragma omp parallel for schedule(static) if (groups > 1)
-    for (Index g = 0; g < groups; ++g) {
-      MatrixXd rows, sum = MatrixXd::Zero(w, add);
-      for (Index b = blocks_of_rows * g / groups; b < blocks_of_rows * (g + 1) / groups; ++b) {
-        const Index i = b * rows_per;
-        rows = Wt.block(i, 0, std::min<Index>(rows_per, n - i), w).cast<double>();
-        sum.noalias() += rows.transpose() * rows.rightCols(add);
-      }
-      parts[size_t(g)] = std::move(sum);
-    }
-    MatrixXd part = MatrixXd::Zero(w, add);
-    for (const MatrixXd& p : parts) part += p;
-    G.block(0, g_cols, w, add) = part;
-    G.block(g_cols, 0, add, g_cols) = part.topRows(g_cols).transpose();
+  auto grow_gram = [&](Index w) {  // G's columns [g_cols, w) from Wt
+    const MatrixXd part = gram_columns(Wt.leftCols(w), g_cols);
+    G.block(0, g_cols, w, w - g_cols) = part;
+    G.block(g_cols, 0, w - g_cols, g_cols) = part.topRows(g_cols).transpose();
     g_cols = w;
   };
   while (true) {

@@ -94,6 +94,12 @@ int choose_rank(const Eigen::VectorXd& lambda, double total, const SvdOptions& o
 // round is ill-conditioned; columns that lie in span(P) to double precision are replaced by
 // pseudo-random ones (svd.cpp). The block step of both block Krylov SVDs (both on the rows side).
 void orthonormalize_against(const Eigen::Ref<const Eigen::MatrixXd>& P, Eigen::Index used, Eigen::Ref<Eigen::MatrixXd> X);
+// Columns [from, w) of Wt^T Wt (w x (w - from), Wt n x w), in double: Wt's rows converted by
+// blocks of at most ~4 MB, in at most 16 fixed groups on the OpenMP threads summed in order (the
+// same bits at any thread count). Both block Krylov SVDs' W W^T, the Ritz step's matrix (a small
+// difference of large sums: float would lose the tail of the spectrum): in core a block's new
+// columns, streamed a chunk's part.
+Eigen::MatrixXd gram_columns(const Eigen::Ref<const Eigen::MatrixXf>& Wt, Eigen::Index from);
 
 // Both block Krylov SVDs' first block (in core, svd.cpp; streamed, ooc_svd.h), on B's n columns:
 // Pi = S G, a sparse sign sketch S (n x s, one +-1 per column of B) and a Gaussian G (s x l),
@@ -111,7 +117,7 @@ Sketch make_column_sketch(size_t n, Eigen::Index l, const SvdOptions& opt);
 // pages cost more than the pass on some VMs).
 void column_sketch_product(const float* B, size_t m, size_t n, const Sketch& sketch, Eigen::Ref<Eigen::MatrixXf> Y,
                            double* energy = nullptr, size_t first = 0, std::vector<float>* scratch = nullptr);
-// The scratch column_sketch_product takes for B m x n at l columns: at most 2 MiB and at most the
+// The scratch column_sketch_product takes for B m x n at l columns: at most 16 MiB and at most the
 // n l floats of a dense Pi (0 when dense: Pi itself is then n x l).
 size_t column_sketch_bytes(size_t m, size_t n, Eigen::Index l);
 

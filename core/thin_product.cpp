@@ -7,7 +7,6 @@
 #include <omp.h>
 #include <memory>
 #include <mutex>
-#include <optional>
 #include <vector>
 
 #include "core/blas_env.h"
@@ -255,8 +254,7 @@ int slices_for(size_t work) {
 void eigen_tn(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z) {
   ConstMapF map(B, Index(m), Index(n));
   const int parts = slices_for(n);
-  std::optional<SingleThreadedBlas> one_blas_thread;  // not from inside a parallel region: the
-  if (parts > 1) one_blas_thread.emplace();            // setting is process-wide
+  const SingleThreadedBlas one_blas_thread(parts > 1);
 #pragma omp parallel for schedule(dynamic, 1) if (parts > 1)
   for (int p = 0; p < parts; ++p) {
     const Index j0 = Index(n) * p / parts, j1 = Index(n) * (p + 1) / parts;
@@ -267,8 +265,7 @@ void eigen_tn(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref
 void eigen_nn(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::Ref<Eigen::MatrixXf> Y) {
   ConstMapF map(B, Index(m), Index(n));
   const int parts = slices_for(m);
-  std::optional<SingleThreadedBlas> one_blas_thread;
-  if (parts > 1) one_blas_thread.emplace();
+  const SingleThreadedBlas one_blas_thread(parts > 1);
 #pragma omp parallel for schedule(dynamic, 1) if (parts > 1)
   for (int p = 0; p < parts; ++p) {
     const Index r0 = Index(m) * p / parts, r1 = Index(m) * (p + 1) / parts;

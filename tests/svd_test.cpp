@@ -198,7 +198,8 @@ TEST(Svd, SparseSignSketchEqualsTheReference) {
 // The column sketch W = B S (the in-core Krylov's first block) on a block of rows of a taller
 // matrix, against the row sketch of that block's transpose, (S^T B^T)^T, from its reference (the
 // same sums in another order: to round-off); the same bits on one thread and on all; the energy
-// against squared_norm. Rows across the 2048-row tasks; one and two layers.
+// against squared_norm; texel order (4096 rows and more) against bucket order (fewer). Rows
+// across the 2048-row tasks; one and two layers.
 TEST(Svd, ColumnSketchEqualsTheRowSketchOfTheTranspose) {
   std::mt19937_64 rng(13);
   std::uniform_real_distribution<float> u(-1.f, 1.f);
@@ -218,6 +219,15 @@ TEST(Svd, ColumnSketchEqualsTheRowSketchOfTheTranspose) {
         omp_set_num_threads(threads);
         ASSERT_EQ(0, std::memcmp(w.data(), w1.data(), w.size() * sizeof(float))) << n << " " << m << " " << s;
         EXPECT_EQ(e, e1);
+        if (m >= 4096) {  // texel order (4096 rows and more) and bucket order (two calls of fewer rows): the same bits
+          for (size_t i0 : {size_t(0), size_t(2000)}) {
+            const size_t h = i0 == 0 ? 2000 : m - 2000;
+            std::vector<float> part(h * s);
+            sparse_sign_columns(b.data() + top + i0, ld, h, n, S, part.data());
+            for (size_t c = 0; c < s; ++c)
+              ASSERT_EQ(0, std::memcmp(part.data() + c * h, w.data() + c * m + i0, h * sizeof(float))) << n << " " << s << " " << c;
+          }
+        }
         for (size_t j = 0; j < n; ++j)
           for (size_t i = 0; i < m; ++i) bt[i * n + j] = block[j * m + i] = b[j * ld + top + i];
         sparse_sign_product_reference(bt.data(), m, S, wr.data(), &er);

@@ -80,8 +80,7 @@ class Krylov {
   }
   void end_chunk(size_t c) {
     if (m_phase != Phase::project) return;
-    const auto W = m_wt[c].leftCols(m_w);
-    m_G += (W.transpose() * W).cast<double>();
+    m_G += gram_columns(m_wt[c].leftCols(m_w), 0);
   }
   void pack(double* sums) const {
     if (m_phase == Phase::sketch) sums[m_m * size_t(m_l)] = m_energy;

@@ -6,7 +6,6 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
-#include <optional>
 #include <random>
 #include <omp.h>
 
@@ -156,8 +155,7 @@ Result<FitResult> fit_local_pca(const Btf& btf, const FitOptions& opt) {
     });
     const bool outer = by_size.size() >= 2 * ws.size();
     {
-      std::optional<SingleThreadedBlas> one_blas_thread;  // the OpenMP threads are the parallelism
-      if (outer) one_blas_thread.emplace();
+      const SingleThreadedBlas one_blas_thread(outer);  // the OpenMP threads are the parallelism
 #pragma omp parallel for schedule(dynamic, 1) if (outer)
       for (size_t j = 0; j < by_size.size(); ++j) {
         const int k = by_size[j];
