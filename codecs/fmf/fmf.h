@@ -135,6 +135,11 @@ size_t dfmf_channels(const float* abrdf, size_t rows, float offset, float* y, fl
 // sum rounds past the largest float (the Y weights are positive and sum to 1).
 bool dfmf_luminance_moments(const float* abrdf, size_t rows, double* sum_y, double* sum_y2);
 double dfmf_auto_offset(double sum_y, double sum_y2);
+// The portable builds of the two loops above, which this CPU's kernels (AVX2 or AVX-512) are
+// tested against: dfmf_channels returns their bits, dfmf_luminance_moments their sums to
+// rounding (its lanes add in another order).
+size_t dfmf_channels_reference(const float* abrdf, size_t rows, float offset, float* y, float* u, float* v);
+bool dfmf_luminance_moments_reference(const float* abrdf, size_t rows, double* sum_y, double* sum_y2);
 // `p` (a color=dfmf fmf spec) with offset = `offset`: the spec a model of that offset carries.
 Result<Params> dfmf_with_offset(const Params& p, double offset);
 
