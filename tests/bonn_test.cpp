@@ -18,10 +18,13 @@
 #include "core/container.h"
 #include "core/synth.h"
 #include "formats/bonn/bonn_btf.h"
+#include "tests/codec_test_util.h"
 
 using namespace btfc;
 
 namespace {
+
+using test::encode_spec;
 
 std::string tmp_path(const std::string& name) {
   return std::string(::testing::TempDir()) + "bonn_" + std::to_string(::getpid()) + "_" + name;
@@ -181,15 +184,6 @@ void expected_rgb(const DfmfSpec& s, const float* v, float* rgb) {
   for (int i = 0; i < 3; ++i) rgb[i] = float(o[i]);
 }
 
-std::unique_ptr<Model> encode(const Btf& btf, const std::string& spec) {
-  auto r = resolve_spec(spec);
-  EXPECT_TRUE(r.ok()) << r.status().message();
-  Context ctx;
-  auto m = r->first->encode(btf, r->second, ctx);
-  EXPECT_TRUE(m.ok()) << m.status().message();
-  return std::move(m).value();
-}
-
 Btf synth(int w, int h, int nl, int nv) {
   SynthOptions o;
   o.width = w, o.height = h;
@@ -232,7 +226,7 @@ Status open_status(const std::string& path) {
 
 TEST(Bonn, DfmfRoundTripFloatIsExact) {
   const Btf btf = synth(6, 5, 9, 4);
-  auto model = encode(btf, "fmf:color=dfmf:rank=5:chroma_rank=3:precision=float:offset=1e-5");
+  auto model = encode_spec(btf, "fmf:color=dfmf:rank=5:chroma_rank=3:precision=float:offset=1e-5");
   const std::string p = tmp_path("rt_float.btf");
   ASSERT_TRUE(write_bonn_dfmf(*model, p, false).ok());
   BonnInfo info;
@@ -250,7 +244,7 @@ TEST(Bonn, DfmfRoundTripFloatIsExact) {
 
 TEST(Bonn, DfmfRoundTripHalfWithinHalfPrecision) {
   const Btf btf = synth(6, 5, 9, 4);
-  auto model = encode(btf, "fmf:color=dfmf:rank=4:precision=half:offset=1e-5");
+  auto model = encode_spec(btf, "fmf:color=dfmf:rank=4:precision=half:offset=1e-5");
   const std::string p = tmp_path("rt_half.btf");
   ASSERT_TRUE(write_bonn_dfmf(*model, p, true).ok());
   auto back = open_ok(p);
@@ -272,7 +266,7 @@ TEST(Bonn, DfmfRoundTripHalfWithinHalfPrecision) {
 
 TEST(Bonn, FmfRoundTripRgbFloatAndHalf) {
   const Btf btf = synth(5, 4, 7, 3);
-  auto model = encode(btf, "fmf:rank=6:precision=float");
+  auto model = encode_spec(btf, "fmf:rank=6:precision=float");
   for (bool half : {false, true}) {
     const std::string p = tmp_path(half ? "fmf_h.btf" : "fmf_f.btf");
     ASSERT_TRUE(write_bonn_fmf(*model, p, half).ok());
@@ -295,7 +289,7 @@ TEST(Bonn, FmfRoundTripRgbFloatAndHalf) {
 
 TEST(Bonn, RgbModelWritesAsDfmfColourModel0AndBackAsFmf) {
   const Btf btf = synth(4, 4, 6, 2);
-  auto model = encode(btf, "fmf:rank=5:precision=float");
+  auto model = encode_spec(btf, "fmf:rank=5:precision=float");
   const std::string p = tmp_path("cm0.btf"), q = tmp_path("cm0_fmf.btf");
   ASSERT_TRUE(write_bonn_dfmf(*model, p, false).ok());
   BonnInfo info;
@@ -683,12 +677,12 @@ TEST(Bonn, TrailingBytesAndInconsistentFieldsAreNamed) {
 
 TEST(Bonn, WritersAreAtomicAndCheckTheHalfRange) {
   const Btf btf = synth(3, 3, 4, 2);
-  auto model = encode(btf, "fmf:rank=3:precision=float");
+  auto model = encode_spec(btf, "fmf:rank=3:precision=float");
   EXPECT_FALSE(write_bonn_fmf(*model, "/nonexistent_dir/x.btf", true).ok());
   SynthOptions o;
   o.width = 3, o.height = 3, o.scale = 1e6f;
   o.lights = small_desc(3, 3, 4, 2).lights, o.views = small_desc(3, 3, 4, 2).views;
-  auto hdr = encode(synthesize_btf(o).value(), "fmf:rank=3:precision=float");
+  auto hdr = encode_spec(synthesize_btf(o).value(), "fmf:rank=3:precision=float");
   const std::string p = tmp_path("hdr.btf");
   const Status s = write_bonn_fmf(*hdr, p, true);
   ASSERT_FALSE(s.ok());

@@ -10,6 +10,7 @@
 #include "codecs/codec.h"
 #include "core/synth.h"
 #include "formats/gpu/export.h"
+#include "tests/codec_test_util.h"
 
 namespace btfc::export_test {
 
@@ -42,16 +43,7 @@ inline std::unique_ptr<Model> encode(const Codec& codec, const Btf& b, const std
   return m.ok() ? std::move(m).value() : nullptr;
 }
 
-// Encodes by spec string ("fmf:rank=8"), failing the test on an error.
-inline std::unique_ptr<Model> encode_spec(const Btf& b, const std::string& spec) {
-  auto r = resolve_spec(spec);
-  EXPECT_TRUE(r.ok()) << r.status().message();
-  if (!r.ok()) return nullptr;
-  Context ctx;
-  auto m = r->first->encode(b, r->second, ctx);
-  EXPECT_TRUE(m.ok()) << m.status().message();
-  return m.ok() ? std::move(m).value() : nullptr;
-}
+using test::encode_spec;  // tests/codec_test_util.h
 
 // A synthetic BTF on the full UBO2003 light and view sets, values scaled by `scale` (HDR tests).
 inline Btf synth_ubo(int w, int h, float scale = 1) {

@@ -11,10 +11,13 @@
 #include "codecs/fmf/fmf_eval.h"
 #include "core/cl_runtime.h"
 #include "core/interp.h"
+#include "tests/codec_test_util.h"
 
 using namespace btfc;
 
 namespace {
+
+using test::encode_spec;
 
 Btf random_btf(const BtfDesc& d, unsigned seed) {
   Btf b = Btf::create(d).value();
@@ -35,15 +38,6 @@ DirectionSet first(const DirectionSet& s, size_t n) {
   out.dirs.resize(n);
   out.name = "custom";
   return out;
-}
-
-std::unique_ptr<Model> encode(const Btf& b, const std::string& spec) {
-  auto r = resolve_spec(spec);
-  EXPECT_TRUE(r.ok()) << r.status().message();
-  Context ctx;
-  auto m = r->first->encode(b, r->second, ctx);
-  EXPECT_TRUE(m.ok()) << m.status().message();
-  return m.ok() ? std::move(m).value() : nullptr;
 }
 
 // Random queries: theta up to 95 degrees (beyond every hull, a few below the horizon), some
@@ -99,7 +93,7 @@ TEST(FmfEval, EveryKernelShapeMatchesTheReference) {
   for (int channels : {3, 1})
     for (int rank : {5, 16, 20, 32, 48}) {
       const BtfDesc d = desc(13, 11, channels, L, V);
-      auto m = encode(random_btf(d, unsigned(rank + channels)), "fmf:rank=" + std::to_string(rank));
+      auto m = encode_spec(random_btf(d, unsigned(rank + channels)), "fmf:rank=" + std::to_string(rank));
       ASSERT_TRUE(m);
       expect_fast_equals_reference(*m, queries(d, 3000, unsigned(rank)), "channels " + std::to_string(channels) + " rank " + std::to_string(rank));
     }
@@ -116,7 +110,7 @@ TEST(FmfEval, EveryBlendKernelThisCpuRunsMatchesTheReference) {
     for (int channels : {3, 1})
       for (int rank : {8, 16, 32, 48}) {
         const BtfDesc d = desc(9, 7, channels, L, V);
-        auto m = encode(random_btf(d, unsigned(rank * channels)), "fmf:rank=" + std::to_string(rank));
+        auto m = encode_spec(random_btf(d, unsigned(rank * channels)), "fmf:rank=" + std::to_string(rank));
         ASSERT_TRUE(m);
         expect_fast_equals_reference(*m, queries(d, 2000, unsigned(rank + 7)),
                                      "path " + std::to_string(int(path)) + " channels " + std::to_string(channels) + " rank " + std::to_string(rank));
@@ -129,7 +123,7 @@ TEST(FmfEval, EveryBlendKernelThisCpuRunsMatchesTheReference) {
 TEST(FmfEval, BatchesOverSeveralBlocksAndFullDirectionSets) {
   // More queries than fmf::k_eval_block (several sorted blocks, both threads), the 81 x 81 set.
   const BtfDesc d = desc(16, 16, 3, DirectionSet::ubo2003(), DirectionSet::ubo2003());
-  auto m = encode(random_btf(d, 3), "fmf:rank=32");
+  auto m = encode_spec(random_btf(d, 3), "fmf:rank=32");
   ASSERT_TRUE(m);
   expect_fast_equals_reference(*m, queries(d, 3 * fmf::k_eval_block + 123, 9), "81 x 81, rank 32");
   // A renderer's frames: every texel under one pair, three pairs.
@@ -146,7 +140,7 @@ TEST(FmfEval, BatchesOverSeveralBlocksAndFullDirectionSets) {
 
 TEST(FmfEval, ExactAtMeasuredDirectionsAndBadQueriesAreErrors) {
   const BtfDesc d = desc(5, 4, 3, first(DirectionSet::ubo2003(), 20), first(DirectionSet::ubo2003(), 9));
-  auto m = encode(random_btf(d, 5), "fmf:rank=16");
+  auto m = encode_spec(random_btf(d, 5), "fmf:rank=16");
   ASSERT_TRUE(m);
   // At measured (light, view) indices a single row is read: equal to eval() bit for bit.
   std::vector<EvalQuery> q;

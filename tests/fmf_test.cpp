@@ -9,10 +9,13 @@
 #include "codecs/codec.h"
 #include "codecs/fmf/fmf.h"
 #include "core/interp.h"
+#include "tests/codec_test_util.h"
 
 using namespace btfc;
 
 namespace {
+
+using test::encode_spec;
 
 BtfDesc make_desc(int w, int h, int nl, int nv) {
   BtfDesc d;
@@ -43,16 +46,6 @@ Eigen::MatrixXd as_matrix(const Btf& b) {
   return Eigen::Map<const Eigen::MatrixXf>(b.data(), Eigen::Index(b.desc().abrdf_size()), Eigen::Index(b.desc().num_texels())).cast<double>();
 }
 
-std::unique_ptr<Model> encode(const Btf& b, const std::string& spec, uint64_t seed = 1) {
-  auto r = resolve_spec(spec);
-  EXPECT_TRUE(r.ok()) << r.status().message();
-  Context ctx;
-  ctx.seed = seed;
-  auto m = r->first->encode(b, r->second, ctx);
-  EXPECT_TRUE(m.ok()) << m.status().message();
-  return m.ok() ? std::move(m).value() : nullptr;
-}
-
 double sq_error(const Btf& a, const Btf& b) {
   double e = 0;
   for (size_t i = 0; i < a.size(); ++i) e += (double(a.data()[i]) - b.data()[i]) * (double(a.data()[i]) - b.data()[i]);
@@ -79,7 +72,7 @@ std::string tmp_path(const std::string& name) { return ::testing::TempDir() + "f
 
 TEST(Fmf, FullRankReconstructsWithinFloatError) {
   Btf b = random_btf(make_desc(10, 9, 4, 3), 36, 0.9, 0.0, 0.0, 1);  // 36 rows x 90 texels, full rank
-  auto m = encode(b, "fmf:rank=36:precision=float");
+  auto m = encode_spec(b, "fmf:rank=36:precision=float");
   Btf out;
   ASSERT_TRUE(m->decode_all(out).ok());
   const double rel = std::sqrt(sq_error(b, out) / as_matrix(b).squaredNorm());
@@ -91,7 +84,7 @@ TEST(Fmf, ExactPathMeetsEckartYoung) {
   Btf b = random_btf(make_desc(12, 10, 5, 3), 40, 0.85, 0.01, 0.3, 2);  // 45 x 120
   const Eigen::VectorXd s = singular_values(b);
   for (int C : {1, 4, 10, 20}) {
-    auto m = encode(b, "fmf:svd=exact:precision=float:rank=" + std::to_string(C));
+    auto m = encode_spec(b, "fmf:svd=exact:precision=float:rank=" + std::to_string(C));
     Btf out;
     ASSERT_TRUE(m->decode_all(out).ok());
     const double optimum = s.tail(s.size() - C).squaredNorm();
@@ -105,7 +98,7 @@ TEST(Fmf, ExactPathMeetsEckartYoung) {
 TEST(Fmf, ExactPathFewTexelsUsesTheOtherGram) {
   Btf b = random_btf(make_desc(3, 2, 6, 4), 6, 0.7, 0.05, 0.0, 3);  // 72 rows x 6 texels: n < m
   const Eigen::VectorXd s = singular_values(b);
-  auto m = encode(b, "fmf:svd=exact:precision=float:rank=3");
+  auto m = encode_spec(b, "fmf:svd=exact:precision=float:rank=3");
   Btf out;
   ASSERT_TRUE(m->decode_all(out).ok());
   EXPECT_NEAR(sq_error(b, out) / s.tail(s.size() - 3).squaredNorm(), 1.0, 1e-4);
@@ -115,7 +108,7 @@ TEST(Fmf, RandomizedWithinOnePercentOfOptimum) {
   Btf b = random_btf(make_desc(48, 48, 9, 4), 100, 0.93, 0.002, 0.1, 4);  // 108 x 2304
   const Eigen::VectorXd s = singular_values(b);
   for (int C : {8, 16, 32}) {
-    auto m = encode(b, "fmf:svd=randomized:oversample=16:power_iters=4:precision=float:rank=" + std::to_string(C));
+    auto m = encode_spec(b, "fmf:svd=randomized:oversample=16:power_iters=4:precision=float:rank=" + std::to_string(C));
     EXPECT_EQ(note(*m, "svd.rgb"), "randomized");
     Btf out;
     ASSERT_TRUE(m->decode_all(out).ok());
@@ -127,7 +120,7 @@ TEST(Fmf, RandomizedWithinOnePercentOfOptimum) {
 
 TEST(Fmf, RandomizedIsDeterministicPerSeed) {
   Btf b = random_btf(make_desc(40, 40, 9, 4), 60, 0.9, 0.01, 0.0, 5);
-  auto a1 = encode(b, "fmf:svd=randomized:rank=8:power_iters=1", 11), a2 = encode(b, "fmf:svd=randomized:rank=8:power_iters=1", 11);
+  auto a1 = encode_spec(b, "fmf:svd=randomized:rank=8:power_iters=1", 11), a2 = encode_spec(b, "fmf:svd=randomized:rank=8:power_iters=1", 11);
   Btf o1, o2;
   ASSERT_TRUE(a1->decode_all(o1).ok());
   ASSERT_TRUE(a2->decode_all(o2).ok());
@@ -138,18 +131,18 @@ TEST(Fmf, TargetErrorPicksTheSmallestSufficientRank) {
   Btf b = random_btf(make_desc(12, 10, 5, 3), 40, 0.85, 0.0, 0.0, 6);
   const Eigen::VectorXd s = singular_values(b);
   const double total = s.squaredNorm(), target = 0.05;
-  auto m = encode(b, "fmf:svd=exact:precision=float:rank=45:target_error=0.05");
+  auto m = encode_spec(b, "fmf:svd=exact:precision=float:rank=45:target_error=0.05");
   const int C = int(stat(*m, "rank.rgb"));
   EXPECT_LE(std::sqrt(s.tail(s.size() - C).squaredNorm() / total), target);
   EXPECT_GT(std::sqrt(s.tail(s.size() - C + 1).squaredNorm() / total), target);
-  auto capped = encode(b, "fmf:svd=exact:precision=float:rank=2:target_error=0.0001");
+  auto capped = encode_spec(b, "fmf:svd=exact:precision=float:rank=2:target_error=0.0001");
   EXPECT_EQ(stat(*capped, "rank.rgb"), 2);
   EXPECT_NE(note(*capped, "target.rgb").find("not reached"), std::string::npos);
 }
 
 TEST(Fmf, HalfStorageErrorIsHalfPrecision) {
   Btf b = random_btf(make_desc(16, 16, 6, 3), 8, 0.8, 0.0, 0.5, 7);  // rank 8 + the offset = rank 9
-  auto f = encode(b, "fmf:rank=9:precision=float"), h = encode(b, "fmf:rank=9:precision=half");
+  auto f = encode_spec(b, "fmf:rank=9:precision=float"), h = encode_spec(b, "fmf:rank=9:precision=half");
   Btf of, oh;
   ASSERT_TRUE(f->decode_all(of).ok());
   ASSERT_TRUE(h->decode_all(oh).ok());
@@ -167,7 +160,7 @@ TEST(Fmf, HalfStorageErrorIsHalfPrecision) {
 TEST(Fmf, ExtremesZerosConstantsOneTexelOneDirection) {
   // All zeros: one zero component, exact zeros back, nothing non-finite.
   Btf z = Btf::create(make_desc(6, 5, 3, 2)).value();
-  auto mz = encode(z, "fmf:rank=4");
+  auto mz = encode_spec(z, "fmf:rank=4");
   Btf oz;
   ASSERT_TRUE(mz->decode_all(oz).ok());
   for (size_t i = 0; i < oz.size(); ++i) ASSERT_EQ(oz.data()[i], 0.0f);
@@ -176,7 +169,7 @@ TEST(Fmf, ExtremesZerosConstantsOneTexelOneDirection) {
   // Constant: rank 1 reproduces it; asking for more is clamped and reported.
   Btf c = Btf::create(make_desc(6, 5, 3, 2)).value();
   for (size_t i = 0; i < c.size(); ++i) c.data()[i] = 0.37f;
-  auto mc = encode(c, "fmf:rank=10:precision=float");
+  auto mc = encode_spec(c, "fmf:rank=10:precision=float");
   Btf oc;
   ASSERT_TRUE(mc->decode_all(oc).ok());
   for (size_t i = 0; i < oc.size(); ++i) ASSERT_NEAR(oc.data()[i], 0.37f, 1e-6);
@@ -185,7 +178,7 @@ TEST(Fmf, ExtremesZerosConstantsOneTexelOneDirection) {
   Btf one = Btf::create(make_desc(1, 1, 1, 1)).value();
   one.data()[0] = 0.2f, one.data()[1] = 0.5f, one.data()[2] = 0.9f;
   for (const char* spec : {"fmf:rank=5:precision=float", "fmf:rank=5:color=dfmf:precision=float"}) {
-    auto m1 = encode(one, spec);
+    auto m1 = encode_spec(one, spec);
     float v[3];
     m1->eval(0, 0, 0, 0, v);
     for (int k = 0; k < 3; ++k) EXPECT_NEAR(v[k], one.data()[k], 2e-6) << spec;
@@ -210,7 +203,7 @@ TEST(Fmf, HdrRangeSurvivesHalfStorage) {
   for (size_t i = 0; i < b.size(); ++i) vmax = std::max(vmax, double(b.data()[i]));
   for (const char* spec : {"fmf:rank=4:precision=half", "fmf:rank=4:color=dfmf:precision=half:offset=1e-5"}) {
     const bool dfmf = std::string(spec).find("dfmf") != std::string::npos;
-    auto mdl = encode(b, spec);
+    auto mdl = encode_spec(b, spec);
     Btf out;
     ASSERT_TRUE(mdl->decode_all(out).ok());
     double worst_rel = 0, worst_abs = 0;
@@ -258,7 +251,7 @@ TEST(Fmf, NonFiniteInputIsAnError) {
 TEST(Fmf, DfmfFullRankRoundTrip) {
   Btf b = random_btf(make_desc(8, 8, 4, 3), 4, 0.8, 0.0, 2.0, 10);  // offset keeps values positive
   for (size_t i = 0; i < b.size(); ++i) b.data()[i] = std::fabs(b.data()[i]);
-  auto m = encode(b, "fmf:color=dfmf:rank=12:precision=float");
+  auto m = encode_spec(b, "fmf:color=dfmf:rank=12:precision=float");
   Btf out;
   ASSERT_TRUE(m->decode_all(out).ok());
   EXPECT_LT(std::sqrt(sq_error(b, out) / as_matrix(b).squaredNorm()), 1e-5);
@@ -267,7 +260,7 @@ TEST(Fmf, DfmfFullRankRoundTrip) {
 TEST(Fmf, RegionAndDirectionSubsetMatchFullDecode) {
   Btf b = random_btf(make_desc(9, 7, 5, 4), 6, 0.8, 0.01, 1.0, 11);
   for (const char* spec : {"fmf:rank=5", "fmf:rank=5:color=dfmf"}) {
-    auto m = encode(b, spec);
+    auto m = encode_spec(b, spec);
     Btf full, part;
     ASSERT_TRUE(m->decode_all(full).ok());
     DecodeRequest q;
@@ -295,7 +288,7 @@ TEST(Fmf, InterpolationIsExactAtMeasuredDirections) {
   d.views.dirs.resize(19);  // first three rings of UBO2014
   d.views.name = "custom";
   Btf b = random_btf(d, 5, 0.8, 0.01, 1.0, 12);
-  auto m = encode(b, "fmf:rank=5");
+  auto m = encode_spec(b, "fmf:rank=5");
   for (int l : {0, 7, 80})
     for (int v : {0, 5, 18}) {
       float a[3], e[3];
@@ -313,7 +306,7 @@ TEST(Fmf, InterpolationIsExactAtMeasuredDirections) {
 TEST(Fmf, SaveLoadRoundTripIsExactAndByteStable) {
   Btf b = random_btf(make_desc(7, 5, 4, 3), 6, 0.8, 0.01, 1.0, 13);
   for (const char* spec : {"fmf:rank=4:precision=half", "fmf:rank=4:precision=float:color=dfmf"}) {
-    auto m = encode(b, spec);
+    auto m = encode_spec(b, spec);
     const std::string p1 = tmp_path("a.btfc"), p2 = tmp_path("b.btfc");
     ASSERT_TRUE(save_model(*m, *find_codec("fmf"), p1).ok());
     auto rd = ContainerReader::open(p1);

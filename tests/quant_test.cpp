@@ -16,10 +16,13 @@
 #include "core/metrics.h"
 #include "core/quant.h"
 #include "core/synth.h"
+#include "tests/codec_test_util.h"
 
 using namespace btfc;
 
 namespace {
+
+using test::encode_spec;
 
 std::vector<float> random_values(size_t n, double sd, unsigned seed) {
   std::mt19937 rng(seed);
@@ -240,22 +243,13 @@ Btf synth(int w, int h) {
   return std::move(b).value();
 }
 
-std::unique_ptr<Model> encode(const Btf& b, const std::string& spec) {
-  auto r = resolve_spec(spec);
-  EXPECT_TRUE(r.ok()) << r.status().message();
-  Context ctx;
-  auto m = r.value().first->encode(b, r.value().second, ctx);
-  EXPECT_TRUE(m.ok()) << m.status().message();
-  return std::move(m).value();
-}
-
 }  // namespace
 
 TEST(FmfQuant, ModelSavesLoadsAndDecodesToTheSameValues) {
   const Btf b = synth(16, 16);
   for (const char* spec : {"fmf:rank=8:precision=q:bits=7", "fmf:rank=6:precision=q:bits=9:textures=dct",
                            "fmf:rank=4:chroma_rank=2:color=dfmf:precision=q:bits=8"}) {
-    auto m = encode(b, spec);
+    auto m = encode_spec(b, spec);
     const std::string path = tmp("fmfq.btfc");
     ASSERT_TRUE(save_model(*m, *find_codec("fmf"), path).ok());
     auto rd = ContainerReader::open(path);
@@ -286,7 +280,7 @@ TEST(FmfQuant, MoreBitsMoreBytesLessError) {
   double last_err = INFINITY;
   uint64_t last_bytes = 0;
   for (int bits : {4, 6, 8, 10}) {
-    auto m = encode(b, "fmf:rank=8:precision=q:bits=" + std::to_string(bits));
+    auto m = encode_spec(b, "fmf:rank=8:precision=q:bits=" + std::to_string(bits));
     Btf out;
     ASSERT_TRUE(m->decode_all(out).ok());
     const double e = compare_btf(b, out, false).value().rmse;
@@ -295,7 +289,7 @@ TEST(FmfQuant, MoreBitsMoreBytesLessError) {
     last_err = e, last_bytes = m->payload_bytes();
   }
   // At 10 bits the quantization error is far below the rank-8 truncation: q10 is as good as half.
-  auto h = encode(b, "fmf:rank=8:precision=half");
+  auto h = encode_spec(b, "fmf:rank=8:precision=half");
   Btf out;
   ASSERT_TRUE(h->decode_all(out).ok());
   EXPECT_LE(last_err, 1.01 * compare_btf(b, out, false).value().rmse);
@@ -304,7 +298,7 @@ TEST(FmfQuant, MoreBitsMoreBytesLessError) {
 
 TEST(FmfQuant, DamagedQuantizedModelFilesFailCleanly) {
   const Btf b = synth(8, 8);
-  auto m = encode(b, "fmf:rank=3:precision=q:bits=6");
+  auto m = encode_spec(b, "fmf:rank=3:precision=q:bits=6");
   const std::string path = tmp("fmfq_dmg.btfc");
   ASSERT_TRUE(save_model(*m, *find_codec("fmf"), path).ok());
   const std::vector<char> file = slurp(path);

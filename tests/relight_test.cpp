@@ -11,9 +11,12 @@
 #include "codecs/codec.h"
 #include "core/sh.h"
 #include "core/synth.h"
+#include "tests/codec_test_util.h"
 
 namespace btfc {
 namespace {
+
+using test::encode_spec;
 
 EnvironmentSH smooth_env(int order) {
   EnvironmentSH env;
@@ -25,15 +28,6 @@ EnvironmentSH smooth_env(int order) {
     env.coeffs.insert(env.coeffs.end(), p.begin(), p.end());
   }
   return env;
-}
-
-std::unique_ptr<Model> encode(const Btf& b, const std::string& spec) {
-  auto r = resolve_spec(spec);
-  EXPECT_TRUE(r.ok()) << r.status().message();
-  Context ctx;
-  auto m = r->first->encode(b, r->second, ctx);
-  EXPECT_TRUE(m.ok()) << m.status().message();
-  return m.ok() ? std::move(m).value() : nullptr;
 }
 
 Btf synth(int w, int h, float scale = 1) {
@@ -50,7 +44,7 @@ double max_abs(const std::vector<float>& v) {
 
 TEST(Relight, LpcaPrtEqualsTheQuadratureOfItsOwnValues) {
   const Btf b = synth(6, 5);
-  auto m = encode(b, "lpca:clusters=2:components=3:precision=float");
+  auto m = encode_spec(b, "lpca:clusters=2:components=3:precision=float");
   ASSERT_TRUE(m);
   for (int order : {1, 3, 5}) {  // <= the model's sh_order (5): the two sums are the same sum
     const EnvironmentSH env = smooth_env(order);
@@ -78,14 +72,14 @@ TEST(Relight, EveryCodecRelightsCloseToTheData) {
   const Btf b = synth(8, 8, 3.0f);
   const EnvironmentSH env = smooth_env(4);
   const Vec3 v = dir_from_theta_phi(0.5, 2.0);
-  auto exact = encode(b, "fmf:rank=4096:precision=float:svd=exact");
+  auto exact = encode_spec(b, "fmf:rank=4096:precision=float:svd=exact");
   ASSERT_TRUE(exact);
   auto ref = exact->relight(env, v);
   ASSERT_TRUE(ref.ok()) << ref.status().message();
   const double peak = max_abs(*ref);
   ASSERT_GT(peak, 0);
   for (const char* spec : {"fmf:rank=8", "lpyr", "lpca:clusters=2:components=4", "mlvq"}) {
-    auto m = encode(b, spec);
+    auto m = encode_spec(b, spec);
     ASSERT_TRUE(m) << spec;
     auto r = m->relight(env, v);
     ASSERT_TRUE(r.ok()) << spec << ": " << r.status().message();
@@ -105,7 +99,7 @@ TEST(Relight, EveryCodecRelightsCloseToTheData) {
 }
 
 TEST(Relight, ErrorsNameTheProblem) {
-  auto m = encode(synth(4, 4), "fmf:rank=4");
+  auto m = encode_spec(synth(4, 4), "fmf:rank=4");
   ASSERT_TRUE(m);
   auto below = m->relight(smooth_env(2), Vec3{0.f, 0.6f, -0.8f});
   ASSERT_FALSE(below.ok());
