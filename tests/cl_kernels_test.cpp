@@ -25,34 +25,15 @@
 #include "codecs/lpyr/lpyr_internal.h"
 #include "core/cl_runtime.h"
 #include "core/synth.h"
+#include "tests/cl_test_util.h"
 #include "tests/test_paths.h"
 
 using namespace btfc;
 
 namespace {
 
-
-// max |a - b| / max(1e-30, max |b|): relative to the data's scale.
-double rel_diff(const float* a, const float* b, size_t n) {
-  double d = 0, m = 1e-30;
-  for (size_t i = 0; i < n; ++i) d = std::max(d, double(std::fabs(a[i] - b[i]))), m = std::max(m, double(std::fabs(b[i])));
-  return d / m;
-}
-double rel_diff(const std::vector<float>& a, const std::vector<float>& b) { return rel_diff(a.data(), b.data(), b.size()); }
-
-fmf_cl::PackedFactors random_factors(int mode, int C, int nL, int nV, int texels, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> u(-1, 1);
-  fmf_cl::PackedFactors f;
-  f.mode = mode, f.C = C, f.nL = nL, f.nV = nV, f.texels = texels;
-  f.blocks = mode == BTFC_FMF_RGB ? 1 : 3;
-  f.rows_per_block = mode == BTFC_FMF_RGB ? 3 * nL * nV : nL * nV;
-  f.U.resize(size_t(f.blocks) * f.rows_per_block * C);
-  f.SxV.resize(size_t(f.blocks) * texels * C);
-  for (float& x : f.U) x = u(rng) / std::sqrt(float(C));
-  for (float& x : f.SxV) x = u(rng) * (mode == BTFC_FMF_RGB ? 1.0f : 0.3f);
-  return f;
-}
+using test::random_factors;
+using test::rel_diff;
 
 btfc_fmf_query random_pair(std::mt19937& rng, int nL, int nV, bool exact) {
   btfc_fmf_query q{};

@@ -14,33 +14,15 @@
 #include "codecs/fmf/fmf_cl.h"
 #include "core/cl_runtime.h"
 #include "core/synth.h"
+#include "tests/cl_test_util.h"
 #include "tests/test_paths.h"
 
 using namespace btfc;
 
 namespace {
 
-
-fmf_cl::PackedFactors random_factors(int mode, int C, int nL, int nV, int texels, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> u(-1, 1);
-  fmf_cl::PackedFactors f;
-  f.mode = mode, f.C = C, f.nL = nL, f.nV = nV, f.texels = texels;
-  f.blocks = mode == BTFC_FMF_RGB ? 1 : 3;
-  f.rows_per_block = mode == BTFC_FMF_RGB ? 3 * nL * nV : nL * nV;
-  f.U.resize(size_t(f.blocks) * f.rows_per_block * C);
-  f.SxV.resize(size_t(f.blocks) * texels * C);
-  for (float& x : f.U) x = u(rng) / std::sqrt(float(C));
-  for (float& x : f.SxV) x = u(rng);
-  return f;
-}
-
-// max |a - b| / max(1, max |b|): relative to the data's scale.
-double rel_diff(const std::vector<float>& a, const std::vector<float>& b) {
-  double d = 0, m = 1;
-  for (size_t i = 0; i < a.size(); ++i) d = std::max(d, double(std::fabs(a[i] - b[i]))), m = std::max(m, double(std::fabs(b[i])));
-  return d / m;
-}
+using test::random_factors;
+using test::rel_diff;
 
 constexpr double k_tol = 1e-5;  // float rounding of C-term dot products, fast-relaxed-math exp
 

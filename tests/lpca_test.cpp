@@ -16,6 +16,7 @@
 #include "core/sh.h"
 #include "formats/exr/envmap.h"
 #include "core/synth.h"
+#include "tests/codec_test_util.h"
 
 using namespace btfc;
 
@@ -588,15 +589,5 @@ TEST(Lpca, MaxBytesSearchesComponentsAndPrecisionWithinTheBudget) {
   const Btf b = synth(8, 8, some_views({0, 9}));
   auto ref = encode(b, "lpca:clusters=2:components=2");
   ASSERT_TRUE(ref);
-  const double budget = double(ref->payload_bytes());
-  Context ctx;
-  auto any = choose_for_target(b, "lpca:clusters=2", Target{Target::Kind::max_bytes, budget}, ctx);
-  ASSERT_TRUE(any.ok()) << any.status().message();
-  EXPECT_LE(double(any->model->payload_bytes()), budget);
-  EXPECT_NE(any->variants.find("precision=q"), std::string::npos) << any->variants;
-  auto half = choose_for_target(b, "lpca:clusters=2:precision=half", Target{Target::Kind::max_bytes, budget}, ctx);
-  ASSERT_TRUE(half.ok()) << half.status().message();
-  Btf out;
-  ASSERT_TRUE(half->model->decode_all(out).ok());
-  EXPECT_GE(any->psnr, compare_btf(b, out, false).value().psnr) << any->variants;
+  test::expect_budget_search_beats_half(b, "lpca:clusters=2", "lpca:clusters=2:precision=half", double(ref->payload_bytes()));
 }

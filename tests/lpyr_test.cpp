@@ -17,6 +17,7 @@
 #include "codecs/target.h"
 #include "core/metrics.h"
 #include "core/synth.h"
+#include "tests/codec_test_util.h"
 
 using namespace btfc;
 
@@ -499,16 +500,5 @@ TEST(Lpyr, MaxBytesSearchesYAndPrecisionWithinTheBudget) {
   const Btf b = synth(16, 16);
   auto ref = encode(b, "lpyr:y=4:c=1");
   ASSERT_TRUE(ref);
-  const double budget = double(ref->payload_bytes());
-  Context ctx;
-  auto any = choose_for_target(b, "lpyr", Target{Target::Kind::max_bytes, budget}, ctx);
-  ASSERT_TRUE(any.ok()) << any.status().message();
-  EXPECT_LE(double(any->model->payload_bytes()), budget);
-  EXPECT_NE(any->variants.find("precision=q"), std::string::npos) << any->variants;
-  auto half = choose_for_target(b, "lpyr:precision=half", Target{Target::Kind::max_bytes, budget}, ctx);
-  ASSERT_TRUE(half.ok()) << half.status().message();
-  EXPECT_LE(double(half->model->payload_bytes()), budget);
-  Btf out;
-  ASSERT_TRUE(half->model->decode_all(out).ok());
-  EXPECT_GE(any->psnr, compare_btf(b, out, false).value().psnr) << any->variants;
+  test::expect_budget_search_beats_half(b, "lpyr", "lpyr:precision=half", double(ref->payload_bytes()));
 }

@@ -318,19 +318,5 @@ TEST(FmfQuant, DamagedQuantizedModelFilesFailCleanly) {
 }
 
 TEST(FmfQuant, MaxBytesSearchesRankAndPrecisionWithinTheBudget) {
-  const Btf b = synth(8, 8);
-  Context ctx;
-  const double budget = 60000;
-  auto any = choose_for_target(b, "fmf", Target{Target::Kind::max_bytes, budget}, ctx);
-  ASSERT_TRUE(any.ok()) << any.status().message();
-  EXPECT_LE(double(any->model->payload_bytes()), budget);
-  EXPECT_NE(any->variants.find("precision=q"), std::string::npos) << any->variants;
-  // Only the rank, at half precision (the spec fixes it): never better than the full search.
-  auto half = choose_for_target(b, "fmf:precision=half", Target{Target::Kind::max_bytes, budget}, ctx);
-  ASSERT_TRUE(half.ok()) << half.status().message();
-  EXPECT_LE(double(half->model->payload_bytes()), budget);
-  EXPECT_NE(half->model->spec().find("precision=half"), std::string::npos);
-  Btf out;
-  ASSERT_TRUE(half->model->decode_all(out).ok());
-  EXPECT_GE(any->psnr, compare_btf(b, out, false).value().psnr);
+  test::expect_budget_search_beats_half(synth(8, 8), "fmf", "fmf:precision=half", 60000);
 }

@@ -15,6 +15,7 @@
 #include "core/sparse_sketch.h"
 #include "core/svd.h"
 #include "core/thin_product.h"
+#include "tests/svd_test_util.h"
 
 namespace btfc {
 namespace {
@@ -49,12 +50,7 @@ std::vector<float> slow_decay_matrix(size_t m, size_t n, uint64_t seed, Eigen::V
   return std::vector<float>(B.data(), B.data() + B.size());
 }
 
-// ||B - U SxV^T||_F / ||B||_F, in double.
-double actual_rel_error(const std::vector<float>& b, size_t m, size_t n, const SvdResult& r) {
-  Eigen::Map<const Eigen::MatrixXf> B(b.data(), Eigen::Index(m), Eigen::Index(n));
-  const Eigen::MatrixXd D = B.cast<double>() - r.U.cast<double>() * r.SxV.cast<double>().transpose();
-  return std::sqrt(D.squaredNorm() / B.cast<double>().squaredNorm());
-}
+using test::actual_rel_error;
 
 TEST(Svd, BlockKrylovIsWithinOnePercentOfEckartYoungInFewerPasses) {
   // 600 columns: a dense Gaussian first block; 1500 columns (>= 4 x 256): the sparse sign sketch.
@@ -97,44 +93,16 @@ TEST(Svd, BlockKrylovIsWithinOnePercentOfEckartYoungInFewerPasses) {
 // copies of the constant direction, orthonormalize_against).
 TEST(Svd, SparseStartHoldsAtTheExtremes) {
   const size_t m = 300, n = 1200;
-  std::mt19937_64 rng(21);
-  std::normal_distribution<float> g(0.f, 1.f);
-  std::vector<std::pair<const char*, std::vector<float>>> cases;
-  cases.emplace_back("zeros", std::vector<float>(m * n, 0.f));
-  cases.emplace_back("constant", std::vector<float>(m * n, 3.5f));
-  {
-    Eigen::MatrixXf U(m, 2), V(n, 2);
-    for (Eigen::Index i = 0; i < U.size(); ++i) U.data()[i] = g(rng);
-    for (Eigen::Index i = 0; i < V.size(); ++i) V.data()[i] = g(rng);
-    const Eigen::MatrixXf B = U * V.transpose();
-    cases.emplace_back("rank 2", std::vector<float>(B.data(), B.data() + B.size()));
-  }
-  {
-    std::vector<float> b = test_matrix(m, n, 40, 22);
-    for (size_t j = 0; j < n; ++j)
-      for (size_t i = 0; i < m; ++i) b[j * m + i] = std::abs(b[j * m + i]) * std::pow(10.f, -6.f + 12.f * float(i) / float(m - 1));
-    cases.emplace_back("HDR 1e-6..1e6", std::move(b));
-  }
-  for (auto& [name, b] : cases) {
+  for (const auto& c : test::extreme_matrices(m, n, 21)) {
     SvdOptions o;
     o.max_rank = 8, o.oversample = 8, o.power_iters = 3, o.method = SvdMethod::randomized;
-    auto r = truncated_svd(b.data(), m, n, o);
-    ASSERT_TRUE(r.ok()) << name;
-    EXPECT_TRUE(r->sparse_start) << name;
-    EXPECT_TRUE(r->U.allFinite() && r->SxV.allFinite()) << name;
+    auto r = truncated_svd(c.b.data(), m, n, o);
+    ASSERT_TRUE(r.ok()) << c.name;
+    EXPECT_TRUE(r->sparse_start) << c.name;
     o.method = SvdMethod::exact;
-    auto exact = truncated_svd(b.data(), m, n, o);
+    auto exact = truncated_svd(c.b.data(), m, n, o);
     ASSERT_TRUE(exact.ok());
-    ASSERT_EQ(r->S.size(), exact->S.size()) << name;  // the same numerical rank
-    if (std::string(name) == "zeros") {
-      EXPECT_EQ(r->SxV.cwiseAbs().maxCoeff(), 0.f);
-      continue;
-    }
-    const double err = actual_rel_error(b, m, n, *r), best = actual_rel_error(b, m, n, *exact);
-    // Exact fits (constant, rank 2) reach float round-off; the others the optimum within 1 %.
-    EXPECT_LE(err, 1.01 * best + 1e-5) << name << ": " << err << " vs exact " << best;
-    // The kept singular values are the data's (a direction counted twice would inflate them).
-    for (Eigen::Index i = 0; i < r->S.size(); ++i) EXPECT_NEAR(r->S(i), exact->S(i), 1e-3 * exact->S(0)) << name << " " << i;
+    test::expect_like_exact(c, m, n, *r, *exact, c.name);
   }
 }
 
