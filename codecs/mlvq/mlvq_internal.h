@@ -265,6 +265,8 @@ class MlvqModel final : public Model {
   // Measured layout: arbitrary directions blend the 3 x 3 nearest measured pairs (core/interp.h).
   DirectionInterpolator m_li, m_vi;
   void dir_pairs(const Vec3& wl, const Vec3& wv, uint32_t pair[9], float w[9]) const;
+  // The 9 measured pairs around (wl, wv) at `texel`, blended (measured layout only).
+  void blend_measured(size_t texel, const Vec3& wl, const Vec3& wv, float rgb[3]) const;
   ModelStats m_stats;
   mutable std::mutex m_dev_mu;  // the device copy for eval_batch, uploaded on first use
   mutable std::shared_ptr<DeviceModel> m_dev;
