@@ -839,7 +839,9 @@ Result<Btf> load_raw_btf(const ContainerReader& reader) {
   if (ti->dtype != DType::f32 || ti->shape != want)
     return corrupt_data(reader.path() + ": chunk TNSR 'data': is " + dtype_name(ti->dtype) + " " + shape_str(ti->shape) +
                         ", DESC needs f32 " + shape_str(want));
-  BTFC_ASSIGN_OR_RETURN(Btf b, Btf::create(d));
+  Result<Btf> created = Btf::create(d);  // over the memory limit: the error names the file
+  if (!created.ok()) return created.status().with_context(reader.path());
+  Btf b = std::move(created).value();
   BTFC_RETURN_IF_ERROR(reader.read_into("data", b.data(), uint64_t(b.size()) * sizeof(float)));
   return b;
 }

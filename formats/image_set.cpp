@@ -283,8 +283,11 @@ Status plan_impl(const std::string& path, BtfDesc& desc, std::vector<ImageFile>&
   return desc.validate().with_context(path);
 }
 
-Result<Btf> read_planned(const BtfDesc& desc, const std::vector<ImageFile>& files) {
-  BTFC_ASSIGN_OR_RETURN(Btf btf, Btf::create(desc));
+// `path`, the set's directory, names the set in the error of a BTF too large for the memory limit.
+Result<Btf> read_planned(const std::string& path, const BtfDesc& desc, const std::vector<ImageFile>& files) {
+  Result<Btf> created = Btf::create(desc);
+  if (!created.ok()) return created.status().with_context(path);
+  Btf btf = std::move(created).value();
   const size_t nl = desc.num_lights(), nv = desc.num_views();
 
   // Work items: blocks of consecutive lights of one view, each decoded into <= ~32 MB.
@@ -321,7 +324,7 @@ Result<Btf> read_impl(const std::string& path) {
   BtfDesc desc;
   std::vector<ImageFile> files;
   BTFC_RETURN_IF_ERROR(plan_impl(path, desc, files));
-  return read_planned(desc, files);
+  return read_planned(path, desc, files);
 }
 
 }  // namespace
@@ -382,7 +385,7 @@ Result<Btf> read_image_set(const ImageSetPlan& plan) {
   std::vector<ImageFile> files(plan.files.size());
   for (size_t i = 0; i < files.size(); ++i) files[i] = {plan.files[i], int(i % plan.desc.num_lights()), int(i / plan.desc.num_lights())};
   try {
-    return read_planned(plan.desc, files);
+    return read_planned(plan.path, plan.desc, files);
   } catch (const std::bad_alloc&) {
     return io_error(plan.path + ": out of memory reading the image set");
   } catch (const std::exception& e) {

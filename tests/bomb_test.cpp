@@ -119,6 +119,21 @@ TEST(Bomb, EveryCodecRefusesADecodeOverTheLimitBeforeAllocating) {
   }
 }
 
+TEST(Bomb, ARawBtfOverTheLimitIsRefusedNamingTheFile) {
+  // The uncompressed input a user compresses (btfc compress in.btfc): the memory-limit error
+  // names the file, as every other error of a reader does.
+  LimitGuard g;
+  auto rd = ContainerReader::open(k_dir + "input.btfc");
+  ASSERT_TRUE(rd.ok()) << rd.status().message();
+  set_memory_limit(size_t(rd.value().desc().num_values() * sizeof(float) / 2));
+  auto b = load_raw_btf(rd.value());
+  ASSERT_FALSE(b.ok());
+  EXPECT_TRUE(mentions_limit(b.status())) << b.status().message();
+  EXPECT_NE(b.status().message().find(k_dir + "input.btfc"), std::string::npos) << b.status().message();
+  set_memory_limit(0);
+  EXPECT_TRUE(load_raw_btf(rd.value()).ok());
+}
+
 TEST(Bomb, EveryCodecRefusesAFileDeclaringAHugeBtf) {
   LimitGuard g;
   set_memory_limit(size_t(256) << 20);  // stands for this machine's RAM: the declared BTF is 2^15 x 2^15 texels

@@ -59,7 +59,10 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   set_allow_partial_image_sets((flags & 1) != 0);
   (void)is_image_set(dir);
   auto check_error = [&](const Status& s) {
-    if (s.message().find(dir) == std::string::npos) __builtin_trap();  // errors name the set or the file
+    if (s.message().find(dir) == std::string::npos) {  // errors name the set or the file
+      std::fprintf(stderr, "fuzz_image_set: error without the set's path: %s\n", s.message().c_str());
+      __builtin_trap();
+    }
   };
   if (flags & 2) {
     auto b = read_image_set(dir);
