@@ -101,7 +101,7 @@ Result<std::vector<Found>> enumerate(const Api& cl) {
   return out;
 }
 
-// Per-thread state: queue and built kernels, keyed by "program/name". Only ever non-empty after
+// Per-thread state: queue and built kernels, keyed by "source folder|program/name". Only ever non-empty after
 // the library was loaded, and the library is never unloaded, so the table is valid here.
 struct ThreadState {
   cl_command_queue queue = nullptr;
@@ -116,7 +116,7 @@ struct ThreadState {
 thread_local ThreadState t_state;
 
 std::mutex g_mutex;
-// Programs are built once per process and shared by all threads.
+// Programs are built once per process and source folder, shared by all threads.
 std::map<std::string, cl_program> g_programs;
 Runtime::Impl* g_impl = nullptr;  // the one runtime's, for queue() below
 
@@ -182,8 +182,16 @@ Result<Runtime*> Runtime::create() {
   return rt;
 }
 
+// The programs' source folder: BTFC_KERNEL_DIR (a developer's edited kernels) or "" (the
+// embedded ones). Part of the caches' keys, so a process that switches it (the broken-kernel
+// tests, after other OpenCL tests in the same process) builds from the folder it now names.
+static std::string kernel_dir() {
+  const char* dir = std::getenv("BTFC_KERNEL_DIR");
+  return dir ? dir : "";
+}
+
 Result<Kernel> Runtime::kernel(const std::string& program, const std::string& name) {
-  const std::string key = program + "/" + name;
+  const std::string program_key = kernel_dir() + "|" + program, key = program_key + "/" + name;
   Kernel out;
   if (auto it = t_state.kernels.find(key); it != t_state.kernels.end()) {
     out.m_kernel = it->second;
@@ -193,7 +201,7 @@ Result<Kernel> Runtime::kernel(const std::string& program, const std::string& na
   cl_program prog = nullptr;
   {
     std::lock_guard<std::mutex> lock(g_mutex);
-    if (auto it = g_programs.find(program); it != g_programs.end()) {
+    if (auto it = g_programs.find(program_key); it != g_programs.end()) {
       prog = it->second;
     } else {
       BTFC_ASSIGN_OR_RETURN(std::string src, kernel_source(program));
@@ -211,7 +219,7 @@ Result<Kernel> Runtime::kernel(const std::string& program, const std::string& na
         return Status(StatusCode::device_error, "building OpenCL program " + program + ".cl failed (" + error_name(err) +
                                                     "); compiler log:\n" + log);
       }
-      g_programs[program] = prog;
+      g_programs[program_key] = prog;
     }
   }
   cl_int err = CL_SUCCESS;

@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <mutex>
+#include <set>
 #include <sstream>
 
 namespace btfc::ocl {
@@ -20,15 +21,16 @@ namespace {
 std::atomic<int> g_choice{-1};
 std::mutex g_mutex;
 std::string g_fallback_reason;
-bool g_warned = false;
+std::set<std::string> g_warned;
 
+// Once per distinct reason (a loop over chunks that fails the same way warns once; a later,
+// different failure, e.g. another kernel's build, is still said), at most k_max_warnings.
+constexpr size_t k_max_warnings = 8;
 void warn_once(const std::string& reason) {
   std::lock_guard<std::mutex> lock(g_mutex);
   g_fallback_reason = reason;
-  if (!g_warned) {
+  if (g_warned.size() < k_max_warnings && g_warned.insert(reason).second)
     std::fprintf(stderr, "warning: %s\n", g_fallback_reason.c_str());
-    g_warned = true;
-  }
 }
 
 }  // namespace

@@ -11,7 +11,7 @@
 // Device choice (set once per process, e.g. by the CLI's --device):
 //   cpu  - never touch OpenCL (the library is not even loaded); every kernel's C++ reference runs.
 //   cl   - OpenCL is required; failures are errors (StatusCode::device_error).
-//   auto - OpenCL when a device works, else warn once on stderr and run the CPU path.
+//   auto - OpenCL when a device works, else warn (once per reason) on stderr and run the CPU path.
 // BTFC_FORCE_CPU=1 forces `cpu` (the test suite's second pass). BTFC_CL_DEVICE picks a device by
 // index ("1") or by a substring of its name ("pthread"); default: the first GPU, else the first
 // device of any type (PoCL's CPU device here).
@@ -104,7 +104,7 @@ class Runtime {
 // Should this call use OpenCL? automatic: yes if the runtime works (else warns once, "no");
 // cl: yes (errors surface later from get()); cpu: no. `why` receives the fallback reason.
 bool use_opencl(std::string* why = nullptr);
-// After an OpenCL path failed with `s`: under `auto`, records the reason, warns once and returns
+// After an OpenCL path failed with `s`: under `auto`, records the reason, warns once per reason and returns
 // true (run the CPU path); under `cl`, returns false (the caller reports `s`).
 bool fall_back_after(const Status& s);
 // The reason OpenCL was not used in this process ("" when it was, or was not asked for).

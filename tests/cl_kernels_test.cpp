@@ -336,8 +336,8 @@ TEST(OpenCLKernels, LpyrEncodeMatchesCpuPath) {
 }
 
 // A broken lpca.cl / lpyr.cl (development override) gives the compiler log under --device cl and
-// falls back to the C++ references with a warning under --device auto. Its own process under
-// ctest (gtest_discover_tests), so the broken programs are not cached for other tests.
+// falls back to the C++ references with a warning under --device auto. Programs are cached by
+// source folder (BTFC_KERNEL_DIR), so this holds in one process after other OpenCL tests too.
 TEST(OpenCLKernels, BrokenLpcaAndLpyrKernelsFallBack) {
   REQUIRE_CL();
   const std::string dir = ::testing::TempDir() + "btfc_broken_codec_kernels_" + std::to_string(::getpid());

@@ -122,8 +122,8 @@ TEST(OpenCL, ModelDecodeAndEvalOnSyntheticBtfMatchCpuPath) {
   }
 }
 
-// Runs in its own process (gtest_discover_tests), so the broken program is not cached for
-// other tests.
+// The runtime caches programs by source folder (BTFC_KERNEL_DIR), so this holds in one process
+// after other OpenCL tests too, and leaves no broken program behind for the tests after it.
 TEST(OpenCL, BrokenKernelGivesCompilerLogAndAutoFallsBack) {
   REQUIRE_CL();
   const std::string dir = ::testing::TempDir() + "btfc_broken_kernels_" + std::to_string(::getpid());
