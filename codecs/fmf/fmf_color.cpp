@@ -179,8 +179,8 @@ inline float log_normal(float x) {
 inline float dot3_scalar(const float* a, const float* p) { return a[0] * p[0] + a[1] * p[1] + a[2] * p[2]; }
 
 // The three channels of `rows` RGB triples; the body of the builds below. The arithmetic is the
-// same IEEE operations in the same order in all (no FMA: btfc compiles without contraction), so
-// the AVX-512 and AVX2 builds return the generic build's bits.
+// same IEEE operations in the same order in all (no FMA: this file is compiled with
+// -ffp-contract=off, CMakeLists.txt), so the AVX-512 and AVX2 builds return the generic build's bits.
 __attribute__((always_inline)) inline size_t channels_body(const float* abrdf, size_t rows, float offset, float* y, float* u,
                                                           float* v) {
   size_t clamped = 0;
