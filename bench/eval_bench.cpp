@@ -10,8 +10,10 @@
 //   - the per-query reference (Model::eval_batch: eval_dir per query), the test oracle;
 //   - the OpenCL kernel on the same weighted queries, when a device is present;
 //   - a coherent stream (frames of all texels under one direction pair) through eval_batch.
+// With --color dfmf: a color=dfmf model instead (three channel blocks of 6561 rows, Bonn's
+// offset), its eval_batch (C++ path, fmf_eval_dfmf.cpp) against the per-query reference only.
 //
-//   bench_eval [--texels 65536] [--rank 32] [--queries 4000000]
+//   bench_eval [--texels 65536] [--rank 32] [--queries 4000000] [--color rgb|dfmf]
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -33,12 +35,18 @@ int main(int argc, char** argv) {
   int texels = 65536, C = 32;
   size_t nq = 4000000;
   bool profile = false;  // --profile 1: only the blend, repeated (for perf)
+  std::string color = "rgb";
   for (int i = 1; i + 1 < argc; i += 2) {
     std::string a = argv[i];
     if (a == "--texels") texels = std::atoi(argv[i + 1]);
     else if (a == "--rank") C = std::atoi(argv[i + 1]);
     else if (a == "--queries") nq = size_t(std::atoll(argv[i + 1]));
     else if (a == "--profile") profile = std::atoi(argv[i + 1]) != 0;
+    else if (a == "--color") color = argv[i + 1];
+  }
+  if (color != "rgb" && color != "dfmf") {
+    std::fprintf(stderr, "bench_eval: --color %s: expected rgb or dfmf\n", color.c_str());
+    return 2;
   }
   const int side = int(std::lround(std::sqrt(double(texels))));
   texels = side * side;
@@ -48,6 +56,67 @@ int main(int argc, char** argv) {
   desc.lights = desc.views = DirectionSet::ubo2003();
   std::mt19937 rng(1);
   std::uniform_real_distribution<float> u(-1, 1);
+  std::uniform_real_distribution<double> u01(0, 1);
+  const double max_theta = 80.0 * M_PI / 180;
+  auto random_queries = [&](size_t n) {
+    std::vector<EvalQuery> q(n);
+    for (EvalQuery& e : q) {
+      e.x = int(rng() % unsigned(side)), e.y = int(rng() % unsigned(side));
+      e.wl = dir_from_theta_phi(u01(rng) * max_theta, u01(rng) * 2 * M_PI);
+      e.wv = dir_from_theta_phi(u01(rng) * max_theta, u01(rng) * 2 * M_PI);
+    }
+    return q;
+  };
+  if (color == "dfmf") {
+    // Random channel factors scaled so that log Y stays within a few units (a real model's range).
+    std::vector<fmf::Block> blocks;
+    for (const char* name : {"y", "u", "v"}) {
+      fmf::Block c;
+      c.name = name;
+      c.U.resize(Eigen::Index(desc.num_lights() * desc.num_views()), C);
+      c.SxV.resize(texels, C);
+      const float g = 1.0f / std::sqrt(float(C));
+      for (Eigen::Index i = 0; i < c.U.size(); ++i) c.U.data()[i] = u(rng) * g;
+      for (Eigen::Index i = 0; i < c.SxV.size(); ++i) c.SxV.data()[i] = u(rng);
+      c.S = Eigen::VectorXf::Ones(C), c.scale = Eigen::VectorXf::Ones(C);
+      blocks.push_back(std::move(c));
+    }
+    fmf::Config dcfg;
+    dcfg.dfmf = true;
+    const fmf::FmfModel m(desc, "fmf:color=dfmf:rank=" + std::to_string(C), dcfg, std::move(blocks));
+    std::printf("dfmf fmf, rank %d, %d x %d texels, 81 x 81 directions, %zu random queries, loops: %s\n", C, side, side, nq,
+                cpu_dispatch_level());
+    const std::vector<EvalQuery> q = random_queries(nq);
+    std::vector<float> out(3 * nq), ref(3 * nq);
+    ocl::set_device_choice(ocl::DeviceChoice::cpu);
+    const double t = best_of(3, [&] { (void)m.eval_batch(q, out.data()); });
+    const size_t nr = std::min<size_t>(nq, 400000);
+    const double t_ref = best_of(1, [&] { (void)m.Model::eval_batch(std::span(q).first(nr), ref.data()); });
+    double num = 0, den = 0;
+    for (size_t i = 0; i < 3 * nr; ++i) num += double(out[i] - ref[i]) * (out[i] - ref[i]), den += double(ref[i]) * ref[i];
+    std::printf("eval_batch, directions (C++ path)     %8.1f M evals/s\n", double(nq) / t / 1e6);
+    std::printf("reference (eval_dir per query)        %8.1f M evals/s   fast / reference = %.1f, rel. L2 diff %.2e\n",
+                double(nr) / t_ref / 1e6, (double(nq) / t) / (double(nr) / t_ref), std::sqrt(num / den));
+    // Coherent frames (every texel under one direction pair per frame): the rows stay in cache,
+    // so this is the path's arithmetic with little of its memory latency.
+    std::vector<EvalQuery> cq(nq);
+    for (size_t i = 0; i < nq; ++i) {
+      cq[i] = q[(i / size_t(texels)) % nq];
+      cq[i].x = int(i % size_t(texels)) % side, cq[i].y = int(i % size_t(texels)) / side;
+    }
+    const double t_coh = best_of(3, [&] { (void)m.eval_batch(cq, out.data()); });
+    std::printf("eval_batch, coherent frames           %8.1f M evals/s\n", double(nq) / t_coh / 1e6);
+    // The OpenCL kernel (--device cl; Bonn's offset, which this model has), when a device is present.
+    ocl::set_device_choice(ocl::DeviceChoice::cl);
+    if (ocl::Runtime::get().ok() && m.eval_batch(std::span(q).first(1000), out.data()).ok()) {
+      const double t_cl = best_of(3, [&] { (void)m.eval_batch(q, out.data()); });
+      std::printf("eval_batch through OpenCL (%s)       %8.1f M evals/s\n", ocl::Runtime::get().value()->info().type.c_str(),
+                  double(nq) / t_cl / 1e6);
+    } else {
+      std::printf("OpenCL: no device\n");
+    }
+    return 0;
+  }
   fmf::Block b;
   b.name = "rgb";
   b.U.resize(Eigen::Index(desc.abrdf_size()), C);
@@ -61,14 +130,7 @@ int main(int argc, char** argv) {
   std::printf("rgb fmf, rank %d, %d x %d texels, 81 x 81 directions, %zu random queries, loops: %s\n", C, side, side, nq,
               cpu_dispatch_level());
 
-  std::vector<EvalQuery> q(nq);
-  std::uniform_real_distribution<double> u01(0, 1);
-  const double max_theta = 80.0 * M_PI / 180;
-  for (EvalQuery& e : q) {
-    e.x = int(rng() % unsigned(side)), e.y = int(rng() % unsigned(side));
-    e.wl = dir_from_theta_phi(u01(rng) * max_theta, u01(rng) * 2 * M_PI);
-    e.wv = dir_from_theta_phi(u01(rng) * max_theta, u01(rng) * 2 * M_PI);
-  }
+  std::vector<EvalQuery> q = random_queries(nq);
   std::vector<float> out(3 * nq), ref(3 * nq);
   auto rate = [&](double t) { return double(nq) / t / 1e6; };
 

@@ -85,6 +85,28 @@ void expect_fast_equals_reference(const Model& m, const std::vector<EvalQuery>& 
   EXPECT_GT(d, 0.0) << what << ": bit-equal to the reference, is the fast path running?";
 }
 
+// Queries at measured (light, view) indices of a 5 x 4-texel BTF with 20 lights and 9 views; the
+// CPU path's eval_batch equals eval() there to `tol` relative. Returns the queries.
+std::vector<EvalQuery> expect_measured_equals_eval(const Model& m, float tol) {
+  std::vector<EvalQuery> q;
+  for (int l = 0; l < 20; l += 3)
+    for (int v = 0; v < 9; v += 2) {
+      EvalQuery e;
+      e.x = l % 5, e.y = v % 4, e.light = l, e.view = v;
+      q.push_back(e);
+    }
+  std::vector<float> got(3 * q.size());
+  ocl::set_device_choice(ocl::DeviceChoice::cpu);
+  EXPECT_TRUE(m.eval_batch(q, got.data()).ok());
+  ocl::set_device_choice(ocl::DeviceChoice::automatic);
+  for (size_t i = 0; i < q.size(); ++i) {
+    float e[3];
+    m.eval(q[i].x, q[i].y, q[i].light, q[i].view, e);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(got[3 * i + c], e[c], tol * (1 + std::fabs(e[c]))) << i;
+  }
+  return q;
+}
+
 }  // namespace
 
 TEST(FmfEval, EveryKernelShapeMatchesTheReference) {
@@ -142,26 +164,43 @@ TEST(FmfEval, ExactAtMeasuredDirectionsAndBadQueriesAreErrors) {
   const BtfDesc d = desc(5, 4, 3, first(DirectionSet::ubo2003(), 20), first(DirectionSet::ubo2003(), 9));
   auto m = encode_spec(random_btf(d, 5), "fmf:rank=16");
   ASSERT_TRUE(m);
-  // At measured (light, view) indices a single row is read: equal to eval() bit for bit.
-  std::vector<EvalQuery> q;
-  for (int l = 0; l < 20; l += 3)
-    for (int v = 0; v < 9; v += 2) {
-      EvalQuery e;
-      e.x = l % 5, e.y = v % 4, e.light = l, e.view = v;
-      q.push_back(e);
-    }
-  std::vector<float> got(3 * q.size());
-  ocl::set_device_choice(ocl::DeviceChoice::cpu);
-  ASSERT_TRUE(m->eval_batch(q, got.data()).ok());
-  for (size_t i = 0; i < q.size(); ++i) {
-    float e[3];
-    m->eval(q[i].x, q[i].y, q[i].light, q[i].view, e);
-    for (int c = 0; c < 3; ++c) EXPECT_NEAR(got[3 * i + c], e[c], 1e-6f * (1 + std::fabs(e[c]))) << i;
-  }
+  // At measured (light, view) indices a single row is read: equal to eval() to rounding.
+  std::vector<EvalQuery> q = expect_measured_equals_eval(*m, 1e-6f);
   // A query outside the BTF is an error naming it, as on the reference path.
   q.back().x = 5;
+  std::vector<float> got(3 * q.size());
+  ocl::set_device_choice(ocl::DeviceChoice::cpu);
   const Status s = m->eval_batch(q, got.data());
   ocl::set_device_choice(ocl::DeviceChoice::automatic);
   EXPECT_FALSE(s.ok());
   EXPECT_NE(s.message().find("outside the BTF"), std::string::npos) << s.message();
+}
+
+TEST(FmfEval, DfmfPathMatchesTheReference) {
+  // color=dfmf (fmf_eval_dfmf.cpp): ranks below, at and above a multiple of 8 (the dots' vector
+  // width), a chroma rank other than the luminance's, the automatic and Bonn's offsets, one
+  // channel set spanning 1e-6..1e6 (log Y from -14 to 14), several blocks of queries.
+  const DirectionSet L = first(DirectionSet::ubo2003(), 31), V = first(DirectionSet::ubo2003(), 13);
+  const BtfDesc d = desc(11, 9, 3, L, V);
+  Btf hdr = random_btf(d, 17);
+  std::mt19937 rng(4);
+  for (size_t i = 0; i < hdr.size(); ++i) hdr.data()[i] = float(std::pow(10.0, -6.0 + 12.0 * double(rng() % 1000) / 999.0));
+  struct Case {
+    const Btf* b;
+    std::string spec;
+  };
+  const Btf ldr = random_btf(d, 18);
+  for (const Case& c : {Case{&ldr, "fmf:color=dfmf:rank=5"}, Case{&ldr, "fmf:color=dfmf:rank=16:chroma_rank=9"},
+                        Case{&ldr, "fmf:color=dfmf:rank=20:offset=1e-5"}, Case{&hdr, "fmf:color=dfmf:rank=12"}}) {
+    auto m = encode_spec(*c.b, c.spec);
+    ASSERT_TRUE(m) << c.spec;
+    expect_fast_equals_reference(*m, queries(d, 9000, 3), c.spec);
+  }
+}
+
+TEST(FmfEval, DfmfPathAtMeasuredDirectionsEqualsEval) {
+  const BtfDesc d = desc(5, 4, 3, first(DirectionSet::ubo2003(), 20), first(DirectionSet::ubo2003(), 9));
+  auto m = encode_spec(random_btf(d, 6), "fmf:color=dfmf:rank=8");
+  ASSERT_TRUE(m);
+  expect_measured_equals_eval(*m, 1e-5f);  // exp_poly and the dots' order: rounding apart
 }

@@ -48,23 +48,25 @@ Status FmfModel::decode_cl(const ResolvedRequest& rr, Btf& out) const {
 }
 
 Status FmfModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
-  if (m_cfg.color_model >= 0 || (m_cfg.dfmf && (m_desc.channels != 3 || !native_eps()))) return Model::eval_batch(q, out);
+  if (m_cfg.color_model >= 0 || (m_cfg.dfmf && m_desc.channels != 3)) return Model::eval_batch(q, out);
   for (const EvalQuery& e : q)
     if (e.x < 0 || e.y < 0 || e.x >= m_desc.width || e.y >= m_desc.height || (e.light >= 0) != (e.view >= 0) ||
         (e.light >= 0 && (size_t(e.light) >= m_desc.num_lights() || size_t(e.view) >= m_desc.num_views())))
       return Model::eval_batch(q, out);  // the reference reports the bad query
-  // rgb mode on a CPU: the sorted-block C++ path (fmf_eval.h). It is also faster than the OpenCL
-  // kernel on PoCL's CPU device (docs/benchmarks.md), so OpenCL serves eval_batch only on a GPU
-  // or when asked for (--device cl).
-  if (!m_cfg.dfmf && m_desc.num_lights() <= 65535 && m_desc.num_views() <= 65535) {  // fmf_eval.cpp packs indices in 16 bits
-    const ocl::DeviceChoice dc = ocl::device_choice();
-    bool gpu = false;
-    if (dc == ocl::DeviceChoice::automatic && ocl::use_opencl()) {
-      auto rt = ocl::Runtime::get();
-      gpu = rt.ok() && rt.value()->info().type == "gpu";
-    }
-    if (dc != ocl::DeviceChoice::cl && !gpu) return eval_batch_cpu(q, out);
+  // On a CPU, the C++ paths (rgb: the sorted blocks of fmf_eval.h; dfmf: fmf_eval_dfmf.cpp). They
+  // are also faster than the OpenCL kernels on PoCL's CPU device (docs/benchmarks.md), so OpenCL
+  // serves eval_batch only on a GPU or when asked for (--device cl), and never for a dfmf offset
+  // other than Bonn's (the kernels hard-code it).
+  const ocl::DeviceChoice dc = ocl::device_choice();
+  bool gpu = false;
+  if (dc == ocl::DeviceChoice::automatic && ocl::use_opencl()) {
+    auto rt = ocl::Runtime::get();
+    gpu = rt.ok() && rt.value()->info().type == "gpu";
   }
+  const bool cpu = dc != ocl::DeviceChoice::cl && !gpu;
+  if (m_cfg.dfmf && (cpu || !native_eps())) return eval_batch_dfmf_cpu(q, out);
+  if (!m_cfg.dfmf && cpu && m_desc.num_lights() <= 65535 && m_desc.num_views() <= 65535)  // fmf_eval.cpp packs indices in 16 bits
+    return eval_batch_cpu(q, out);
   if (m_desc.channels != 3 || !ocl::use_opencl()) return Model::eval_batch(q, out);
   // Convert to the kernel's query layout: directions become 3 + 3 (index, weight) pairs (the
   // renderer's index / weight textures).

@@ -166,6 +166,9 @@ class FmfModel final : public Model {
   // with the same directions as its predecessor reuses its weights (a frame's texels under one
   // light and view), since the two Delaunay lookups cost more than the evaluation.
   Status eval_batch_cpu(std::span<const EvalQuery> q, float* out) const;
+  // color=dfmf (own colour model, 3 channels, validated queries): 9 pairs per query evaluated
+  // and blended in vector loops (fmf_eval_dfmf.cpp).
+  Status eval_batch_dfmf_cpu(std::span<const EvalQuery> q, float* out) const;
   void to_weighted(const EvalQuery* q, size_t n, btfc_fmf_query* out) const;
 
   // The factors in the OpenCL kernels' layout (codecs/fmf/fmf_cl.h), uploaded on first use.
@@ -183,6 +186,9 @@ class FmfModel final : public Model {
   mutable std::shared_ptr<fmf_cl::DeviceFactors> m_cl;
   mutable std::once_flag m_eval_once;
   mutable std::shared_ptr<float> m_eval_copy;
+  // color=dfmf's copy for eval_batch_dfmf_cpu: the three blocks interleaved, on huge pages.
+  mutable std::once_flag m_dfmf_once;
+  mutable std::shared_ptr<float> m_dfmf_copy;
 };
 
 }  // namespace btfc::fmf
