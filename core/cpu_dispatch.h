@@ -40,5 +40,8 @@ bool cpu_has_avx512f();
 // kernel (target("avx2,fma")), for CPUs without AVX-512 (core/thin_product.cpp,
 // codecs/fmf/fmf_eval.cpp).
 bool cpu_has_avx2_fma();
+// Whether this is an Intel CPU (tested once): the one kernel choice made by vendor, B X's
+// (core/thin_product.cpp), where the two vendors measured differ.
+bool cpu_is_intel();
 
 }  // namespace btfc

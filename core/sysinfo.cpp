@@ -68,6 +68,18 @@ bool cpu_has_avx512f() {
 #endif
 }
 
+bool cpu_is_intel() {
+#if defined(__x86_64__) && defined(__GNUC__)
+  static const bool yes = [] {
+    __builtin_cpu_init();
+    return __builtin_cpu_is("intel") != 0;
+  }();
+  return yes;
+#else
+  return false;
+#endif
+}
+
 bool cpu_has_avx2_fma() {
 #if defined(__x86_64__) && defined(__GNUC__)
   static const bool yes = [] {

@@ -7,7 +7,7 @@
 // its thread pool spins beside the OpenMP one (docs/benchmarks.md, "fmf factorization"). These
 // kernels read B once, stream it sequentially with software prefetch, and keep the small
 // operand in L1/L2. They are AVX-512, chosen at run time, plus an AVX2 B^T Y for l <= 96;
-// elsewhere (another CPU, wider l, and B X without AVX-512) the products are Eigen products
+// elsewhere (another CPU, wider l, and B X without AVX-512 or on Intel CPUs, thin_product.cpp) the products are Eigen products
 // (OpenBLAS when linked) on slices of B in OpenMP threads, one BLAS thread each (OpenBLAS's own
 // pool spins against the OpenMP threads of the code around). Float sums in a fixed order per
 // output, so a result does not depend on the thread count; within GEMM round-off of the
@@ -33,6 +33,9 @@ bool transposed_product_avx2(const float* B, size_t m, size_t n, const ConstRefF
 // Y = B X: Y m x l, X n x l, different memory. A MatrixXf Y is resized; a Ref must be m x l.
 void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::Ref<Eigen::MatrixXf> Y);
 void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::MatrixXf& Y);
+// For tests: thin_product through the AVX-512 tiles on any CPU with AVX-512 (Intel's take
+// OpenBLAS in thin_product). Returns false where the tiles do not apply (Y resized, not written).
+bool thin_product_tiles(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::MatrixXf& Y);
 
 // ||B||_F^2 over `count` floats, summed in double (vectorized, parallel, fixed block order).
 double squared_norm(const float* B, size_t count);

@@ -313,6 +313,7 @@ TEST(Svd, ThinProductKernelEqualsTheReference) {
   // task, texels past one 128-texel chunk, and fewer rows than a tile.
   std::mt19937_64 rng(5);
   std::uniform_real_distribution<float> u(-1.f, 1.f);
+  int tile_runs = 0;
   for (auto [m, n] : {std::pair<size_t, size_t>{2500, 203}, {37, 70}, {20, 9}, {1024, 1}}) {
     std::vector<float> b(m * n);
     for (float& x : b) x = u(rng);
@@ -325,7 +326,15 @@ TEST(Svd, ThinProductKernelEqualsTheReference) {
       ASSERT_EQ(Y.rows(), Eigen::Index(m));
       ASSERT_EQ(Y.cols(), l);
       EXPECT_LT((Y.cast<double>() - ref).cwiseAbs().maxCoeff(), 4e-7 * double(n) + 1e-6) << "m " << m << " n " << n << " l " << l;
+      // The AVX-512 tiles themselves, also on Intel CPUs (whose thin_product takes OpenBLAS).
+      if (thin_product_tiles(b.data(), m, n, X, Y)) {
+        ++tile_runs;
+        EXPECT_LT((Y.cast<double>() - ref).cwiseAbs().maxCoeff(), 4e-7 * double(n) + 1e-6) << "tiles, m " << m << " n " << n << " l " << l;
+      }
     }
+  }
+  if (cpu_has_avx512f()) {
+    EXPECT_EQ(tile_runs, 3 * 11) << "every l <= 128 with m >= 32 rows";
   }
   // No texels: a zero product (the kernels' loops would leave their staging unwritten).
   {
