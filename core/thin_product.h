@@ -7,9 +7,9 @@
 // its thread pool spins beside the OpenMP one (docs/benchmarks.md, "fmf factorization"). These
 // kernels read B once, stream it sequentially with software prefetch, and keep the small
 // operand in L1/L2. They are AVX-512, chosen at run time, plus an AVX2 B^T Y for l <= 96;
-// elsewhere (another CPU, wider l, and B X without AVX-512 or on Intel CPUs, thin_product.cpp) the products are Eigen products
-// (OpenBLAS when linked) on slices of B in OpenMP threads, one BLAS thread each (OpenBLAS's own
-// pool spins against the OpenMP threads of the code around). Float sums in a fixed order per
+// elsewhere (another CPU, wider l, and B X without AVX-512 or on Intel CPUs: thin_product.cpp)
+// the products are Eigen products (OpenBLAS when linked) on slices of B in OpenMP threads, one
+// BLAS thread each (OpenBLAS's own pool spins against the OpenMP threads of the code around). Float sums in a fixed order per
 // output, so a result does not depend on the thread count; within GEMM round-off of the
 // reference products.
 #pragma once
