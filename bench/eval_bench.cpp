@@ -67,6 +67,15 @@ int main(int argc, char** argv) {
     }
     return q;
   };
+  // Frames of every texel under one direction pair each (the pairs of q's first queries in turn).
+  auto coherent_frames = [&](const std::vector<EvalQuery>& q) {
+    std::vector<EvalQuery> cq(nq);
+    for (size_t i = 0; i < nq; ++i) {
+      cq[i] = q[(i / size_t(texels)) % nq];
+      cq[i].x = int(i % size_t(texels)) % side, cq[i].y = int(i % size_t(texels)) / side;
+    }
+    return cq;
+  };
   if (color == "dfmf") {
     // Random channel factors scaled so that log Y stays within a few units (a real model's range).
     std::vector<fmf::Block> blocks;
@@ -99,11 +108,7 @@ int main(int argc, char** argv) {
                 double(nr) / t_ref / 1e6, (double(nq) / t) / (double(nr) / t_ref), std::sqrt(num / den));
     // Coherent frames (every texel under one direction pair per frame): the rows stay in cache,
     // so this is the path's arithmetic with little of its memory latency.
-    std::vector<EvalQuery> cq(nq);
-    for (size_t i = 0; i < nq; ++i) {
-      cq[i] = q[(i / size_t(texels)) % nq];
-      cq[i].x = int(i % size_t(texels)) % side, cq[i].y = int(i % size_t(texels)) / side;
-    }
+    const std::vector<EvalQuery> cq = coherent_frames(q);
     const double t_coh = best_of(3, [&] { (void)m.eval_batch(cq, out.data()); });
     std::printf("eval_batch, coherent frames           %8.1f M evals/s\n", double(nq) / t_coh / 1e6);
     // The OpenCL kernel (--device cl; Bonn's offset, which this model has), when a device is present.
@@ -221,11 +226,7 @@ int main(int argc, char** argv) {
 
   // Coherent: frames of every texel under one direction pair each.
   ocl::set_device_choice(ocl::DeviceChoice::cpu);
-  std::vector<EvalQuery> cq(nq);
-  for (size_t i = 0; i < nq; ++i) {
-    cq[i] = q[(i / size_t(texels)) % nq];
-    cq[i].x = int(i % size_t(texels)) % side, cq[i].y = int(i % size_t(texels)) / side;
-  }
+  const std::vector<EvalQuery> cq = coherent_frames(q);
   const double t_coh = best_of(3, [&] { (void)model.eval_batch(cq, out.data()); });
   std::printf("eval_batch, coherent frames           %8.1f M evals/s\n", rate(t_coh));
   // The same two streams through the OpenCL path of eval_batch (--device cl), when present.
