@@ -218,13 +218,17 @@ size_t channels_generic(const float* abrdf, size_t rows, float offset, float* y,
   return channels_body(abrdf, rows, offset, y, u, v);
 }
 #if defined(__x86_64__) && defined(__GNUC__)
-__attribute__((target("avx512f"))) size_t channels_avx512(const float* abrdf, size_t rows, float offset, float* y, float* u, float* v) {
-  return channels_body(abrdf, rows, offset, y, u, v);
-}
 // AVX2 by hand: GCC's vectorization of channels_body for AVX2 took 2.1 ns per row and core with
 // the data in cache, this kernel 1.8 ns (2.9 and 2.7 ns from memory; scratch harness on Zen 3).
 // No FMA and every operation in channels_body's order, so the same bits as the generic build
 // (tests/ooc_dfmf_test.cpp compares them).
+
+// How far ahead (rows of 12 bytes) the channels kernels prefetch their input: GCC's loops ran at
+// 0.78 ns per row and core with the input in cache (AVX-512) but at 1.9 ns from memory on a
+// 2-core Xeon reading 28 GB/s, the loop's body too long for the core to run far enough ahead on
+// its own. Scratch harness, parts as the encode's: 64 rows ahead 1.45-1.6 ns, 128 1.3-1.5,
+// 192-1024 1.4-1.6 (AVX2 build: 2.3-2.5 without).
+constexpr size_t k_channels_ahead = 128;
 
 // Rows r..r+7 of an RGB-triple array (24 floats from p) as R, G, B lanes: R sits in lanes
 // {0,3,6} of the first load, {1,4,7} of the second and {2,5} of the third, so two blends gather
@@ -262,6 +266,7 @@ __attribute__((target("avx2"), always_inline)) inline __m256 log_normal8(__m256 
   return _mm256_add_ps(_mm256_add_ps(m, y), _mm256_mul_ps(_mm256_set1_ps(k_log_e_hi), fe));
 }
 __attribute__((target("avx2"))) size_t channels_avx2(const float* abrdf, size_t rows, float offset, float* y, float* u, float* v) {
+  constexpr size_t k_ahead = k_channels_ahead;
   const __m256 off = _mm256_set1_ps(offset), zero = _mm256_setzero_ps();
   const __m256 lo = _mm256_set1_ps(1.17549435e-38f), hi = _mm256_set1_ps(3.40282347e38f);
   size_t clamped = 0, r = 0;
@@ -269,6 +274,10 @@ __attribute__((target("avx2"))) size_t channels_avx2(const float* abrdf, size_t 
   while (r + 8 <= rows) {
     __m256i count = _mm256_setzero_si256();  // per lane, flushed every 2^28 groups
     for (size_t g = 0; g < (size_t(1) << 28) && r + 8 <= rows; ++g, r += 8) {
+      if (r + k_ahead + 8 <= rows) {  // 8 rows are 1.5 cache lines: the line of each end
+        const char* p = reinterpret_cast<const char*>(abrdf + 3 * (r + k_ahead));
+        _mm_prefetch(p, _MM_HINT_T0), _mm_prefetch(p + 95, _MM_HINT_T0);
+      }
       __m256 R, G, B;
       rgb8(abrdf + 3 * r, R, G, B);
       const __m256 l = dot3(k_yuv.m[0], R, G, B);
@@ -284,6 +293,84 @@ __attribute__((target("avx2"))) size_t channels_avx2(const float* abrdf, size_t 
     for (uint32_t n : c) clamped += n;
   }
   if (!_mm256_testz_ps(odd, odd))  // as channels_body: std::log's answer for sums that are not normal
+    for (size_t k = 0; k < r; ++k) {
+      const float d = std::max(dot3_scalar(k_yuv.m[0], abrdf + 3 * k), 0.0f) + offset;
+      if (!(d >= 1.17549435e-38f && d <= 3.40282347e38f)) y[k] = std::log(d);
+    }
+  return clamped + channels_body(abrdf + 3 * r, rows - r, offset, y + r, u + r, v + r);
+}
+// Channel c of rows r..r+15 (48 floats from p, loaded as v0..v2): lane i is float 3 i + c,
+// found in (v0, v1) by one two-source permute when below 32, then the rest from v2 by a second.
+struct RgbIndex16 {
+  alignas(64) int first[3][16], second[3][16];
+  constexpr RgbIndex16() : first{}, second{} {
+    for (int c = 0; c < 3; ++c)
+      for (int i = 0; i < 16; ++i) {
+        const int p = 3 * i + c;
+        first[c][i] = p < 32 ? p : 0;
+        second[c][i] = p < 32 ? i : 16 + (p - 32);
+      }
+  }
+};
+constexpr RgbIndex16 k_rgb16;
+__attribute__((target("avx512f"), always_inline)) inline __m512 channel16(int c, __m512 v0, __m512 v1, __m512 v2) {
+  const __m512 t = _mm512_permutex2var_ps(v0, _mm512_load_si512(k_rgb16.first[c]), v1);
+  return _mm512_permutex2var_ps(t, _mm512_load_si512(k_rgb16.second[c]), v2);
+}
+// (a0 R + a1 G) + a2 B on 16 lanes, as the scalar expression rounds it.
+__attribute__((target("avx512f"), always_inline)) inline __m512 dot3_16(const float* a, __m512 R, __m512 G, __m512 B) {
+  return _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(_mm512_set1_ps(a[0]), R), _mm512_mul_ps(_mm512_set1_ps(a[1]), G)),
+                       _mm512_mul_ps(_mm512_set1_ps(a[2]), B));
+}
+// log_normal on 16 lanes, its operations in its order.
+__attribute__((target("avx512f"), always_inline)) inline __m512 log_normal16(__m512 x) {
+  const __m512i i = _mm512_castps_si512(x);
+  __m512i e = _mm512_sub_epi32(_mm512_and_si512(_mm512_maskz_srli_epi32(0xffff, i, 23), _mm512_set1_epi32(0xff)), _mm512_set1_epi32(126));
+  const __m512i mi = _mm512_or_si512(_mm512_and_si512(i, _mm512_set1_epi32(0x7fffff)), _mm512_set1_epi32(0x3f000000));
+  const __mmask16 low = _mm512_cmplt_epi32_mask(mi, _mm512_set1_epi32(int(std::bit_cast<uint32_t>(k_sqrt_half))));
+  e = _mm512_mask_sub_epi32(e, low, e, _mm512_set1_epi32(1));
+  const __m512 one = _mm512_set1_ps(1.0f);
+  const __m512 m = _mm512_sub_ps(_mm512_mul_ps(_mm512_castsi512_ps(mi), _mm512_mask_blend_ps(low, one, _mm512_set1_ps(2.0f))), one);
+  const __m512 z = _mm512_mul_ps(m, m), z2 = _mm512_mul_ps(z, z);
+  __m512 q[4];
+  for (int k = 0; k < 4; ++k) q[k] = _mm512_sub_ps(_mm512_set1_ps(k_log_a[k]), _mm512_mul_ps(_mm512_set1_ps(k_log_b[k]), m));
+  const __m512 r0 = _mm512_add_ps(q[0], _mm512_mul_ps(q[1], z)), r1 = _mm512_add_ps(q[2], _mm512_mul_ps(q[3], z));
+  __m512 y = _mm512_add_ps(_mm512_add_ps(r0, _mm512_mul_ps(r1, z2)), _mm512_mul_ps(_mm512_set1_ps(k_log_top), _mm512_mul_ps(z2, z2)));
+  y = _mm512_mul_ps(_mm512_mul_ps(y, m), z);
+  const __m512 fe = _mm512_maskz_cvtepi32_ps(0xffff, e);  // maskz: see moments_avx512
+  y = _mm512_add_ps(y, _mm512_mul_ps(_mm512_set1_ps(k_log_e_lo), fe));
+  y = _mm512_add_ps(y, _mm512_mul_ps(_mm512_set1_ps(-0.5f), z));
+  return _mm512_add_ps(_mm512_add_ps(m, y), _mm512_mul_ps(_mm512_set1_ps(k_log_e_hi), fe));
+}
+// By hand as channels_avx2, so that it can prefetch (k_channels_ahead); the same bits as
+// channels_body (tests/ooc_dfmf_test.cpp compares them).
+__attribute__((target("avx512f"))) size_t channels_avx512(const float* abrdf, size_t rows, float offset, float* y, float* u, float* v) {
+  constexpr size_t k_ahead = k_channels_ahead;
+  const __m512 off = _mm512_set1_ps(offset), zero = _mm512_setzero_ps();
+  const __m512 lo = _mm512_set1_ps(1.17549435e-38f), hi = _mm512_set1_ps(3.40282347e38f);
+  __m512i count = _mm512_setzero_si512();  // per lane: at most rows / 16 < 2^32 each
+  __mmask16 odd = 0;
+  size_t r = 0;
+  for (; r + 16 <= rows; r += 16) {
+    const float* p = abrdf + 3 * r;
+    if (r + k_ahead + 16 <= rows)  // 16 rows are 3 cache lines
+      for (int k = 0; k < 3; ++k) _mm_prefetch(reinterpret_cast<const char*>(p + 3 * k_ahead + 16 * k), _MM_HINT_T0);
+    const __m512 v0 = _mm512_loadu_ps(p), v1 = _mm512_loadu_ps(p + 16), v2 = _mm512_loadu_ps(p + 32);
+    const __m512 R = channel16(0, v0, v1, v2), G = channel16(1, v0, v1, v2), B = channel16(2, v0, v1, v2);
+    const __m512 l = dot3_16(k_yuv.m[0], R, G, B);
+    count = _mm512_mask_add_epi32(count, _mm512_cmp_ps_mask(l, zero, _CMP_LT_OQ), count, _mm512_set1_epi32(1));
+    // max(0, NaN) is NaN, as std::max(l, 0.0f); the maskz form: see moments_avx512
+    const __m512 d = _mm512_add_ps(_mm512_maskz_max_ps(0xffff, zero, l), off);
+    _mm512_storeu_ps(u + r, _mm512_div_ps(dot3_16(k_yuv.m[1], R, G, B), d));
+    _mm512_storeu_ps(v + r, _mm512_div_ps(dot3_16(k_yuv.m[2], R, G, B), d));
+    _mm512_storeu_ps(y + r, log_normal16(d));
+    odd |= _mm512_cmp_ps_mask(d, lo, _CMP_NGE_UQ) | _mm512_cmp_ps_mask(d, hi, _CMP_NLE_UQ);
+  }
+  alignas(64) uint32_t c[16];
+  _mm512_store_si512(c, count);
+  size_t clamped = 0;
+  for (uint32_t n : c) clamped += n;
+  if (odd)  // as channels_body: std::log's answer for sums that are not normal
     for (size_t k = 0; k < r; ++k) {
       const float d = std::max(dot3_scalar(k_yuv.m[0], abrdf + 3 * k), 0.0f) + offset;
       if (!(d >= 1.17549435e-38f && d <= 3.40282347e38f)) y[k] = std::log(d);
@@ -343,8 +430,38 @@ __attribute__((always_inline)) inline bool moments_body(const float* abrdf, size
 }
 bool moments_generic(const float* abrdf, size_t rows, double* sum_y, double* sum_y2) { return moments_body(abrdf, rows, sum_y, sum_y2); }
 #if defined(__x86_64__) && defined(__GNUC__)
+// By hand as the AVX2 kernel below: GCC left moments_body scalar for AVX-512 too (the float lanes
+// and the double sums have different widths), which made the moments pass of a color=dfmf encode
+// cost about as much as the three conversions together on a 2-core Xeon (perf, bench_fmf rank 16).
 __attribute__((target("avx512f"))) bool moments_avx512(const float* abrdf, size_t rows, double* sum_y, double* sum_y2) {
-  return moments_body(abrdf, rows, sum_y, sum_y2);
+  const __m512 zero = _mm512_setzero_ps(), big = _mm512_set1_ps(3.40282347e38f), nbig = _mm512_set1_ps(-3.40282347e38f);
+  const __m512 a0 = _mm512_set1_ps(k_yuv.m[0][0]), a1 = _mm512_set1_ps(k_yuv.m[0][1]), a2 = _mm512_set1_ps(k_yuv.m[0][2]);
+  __m512d s[2] = {_mm512_setzero_pd(), _mm512_setzero_pd()}, s2[2] = {_mm512_setzero_pd(), _mm512_setzero_pd()};
+  __mmask16 bad = 0;
+  size_t r = 0;
+  for (; r + 16 <= rows; r += 16) {
+    const float* p = abrdf + 3 * r;
+    if (r + k_channels_ahead + 16 <= rows)  // as channels_avx512
+      for (int k = 0; k < 3; ++k) _mm_prefetch(reinterpret_cast<const char*>(p + 3 * k_channels_ahead + 16 * k), _MM_HINT_T0);
+    const __m512 v0 = _mm512_loadu_ps(p), v1 = _mm512_loadu_ps(p + 16), v2 = _mm512_loadu_ps(p + 32);
+    const __m512 R = channel16(0, v0, v1, v2), G = channel16(1, v0, v1, v2), B = channel16(2, v0, v1, v2);
+    const __m512 l = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(a0, R), _mm512_mul_ps(a1, G)), _mm512_mul_ps(a2, B));
+    bad |= _mm512_cmp_ps_mask(l, nbig, _CMP_NGE_UQ) | _mm512_cmp_ps_mask(l, big, _CMP_NLE_UQ);
+    // The maskz forms with full masks are the same instructions; GCC 12's unmasked ones pass an
+    // "undefined" register it then warns about (its bug 105593).
+    const __m512 y = _mm512_maskz_max_ps(0xffff, l, zero);  // NaN -> 0, as std::max(0.0f, l)
+    const __m512d y0 = _mm512_maskz_cvtps_pd(0xff, _mm256_castpd_ps(_mm512_maskz_extractf64x4_pd(0xf, _mm512_castps_pd(y), 0)));
+    const __m512d y1 = _mm512_maskz_cvtps_pd(0xff, _mm256_castpd_ps(_mm512_maskz_extractf64x4_pd(0xf, _mm512_castps_pd(y), 1)));
+    s[0] = _mm512_add_pd(s[0], y0), s[1] = _mm512_add_pd(s[1], y1);
+    s2[0] = _mm512_add_pd(s2[0], _mm512_mul_pd(y0, y0)), s2[1] = _mm512_add_pd(s2[1], _mm512_mul_pd(y1, y1));
+  }
+  alignas(64) double a[8], b[8];  // not _mm512_reduce_add_pd: it warns as above
+  _mm512_store_pd(a, _mm512_add_pd(s[0], s[1]));
+  _mm512_store_pd(b, _mm512_add_pd(s2[0], s2[1]));
+  *sum_y += ((a[0] + a[1]) + (a[2] + a[3])) + ((a[4] + a[5]) + (a[6] + a[7]));
+  *sum_y2 += ((b[0] + b[1]) + (b[2] + b[3])) + ((b[4] + b[5]) + (b[6] + b[7]));
+  const bool tail_bad = moments_body(abrdf + 3 * r, rows - r, sum_y, sum_y2);
+  return tail_bad || bad != 0;
 }
 // By hand: GCC leaves moments_body scalar for AVX2 (the float lanes and the double sums have
 // different widths), 7.8 GB/s on 2 Zen 3 cores; this kernel 15 GB/s (scratch harness).
@@ -354,6 +471,10 @@ __attribute__((target("avx2"))) bool moments_avx2(const float* abrdf, size_t row
   __m256 bad = zero;
   size_t r = 0;
   for (; r + 8 <= rows; r += 8) {
+    if (r + k_channels_ahead + 8 <= rows) {  // as channels_avx2
+      const char* p = reinterpret_cast<const char*>(abrdf + 3 * (r + k_channels_ahead));
+      _mm_prefetch(p, _MM_HINT_T0), _mm_prefetch(p + 95, _MM_HINT_T0);
+    }
     __m256 R, G, B;
     rgb8(abrdf + 3 * r, R, G, B);
     const __m256 l = dot3(k_yuv.m[0], R, G, B);
