@@ -134,14 +134,13 @@ BTFC_CPU_CLONES void blend_dfmf(const DfmfFactors& f, const btfc_fmf_query* q, s
     }
     float ex[9];
     for (int p = 0; p < 9; ++p) ex[p] = exp_poly(dots[0][p]);
-    // FmfModel::undecorrelate per pair, then the blend: acc += w * rgb, in the pairs' order.
+    // FmfModel::undecorrelate per pair (dfmf_rgb), then the blend: acc += w * rgb, in the pairs' order.
     float acc[3] = {0, 0, 0};
     for (int p = 0; p < 9; ++p) {
       if (w[p] == 0) continue;
-      const float y = ex[p] - f.offset, ye = y + f.offset;
-      const float yuv[3] = {y, dots[1][p] * ye, dots[2][p] * ye};
-      for (int c = 0; c < 3; ++c)
-        acc[c] += w[p] * (k_rgb_from_yuv[c][0] * yuv[0] + k_rgb_from_yuv[c][1] * yuv[1] + k_rgb_from_yuv[c][2] * yuv[2]);
+      float rgb[3];
+      dfmf_rgb(ex[p], dots[1][p], dots[2][p], f.offset, rgb);
+      for (int c = 0; c < 3; ++c) acc[c] += w[p] * rgb[c];
     }
     for (int c = 0; c < 3; ++c) out[3 * i + c] = acc[c];
   }

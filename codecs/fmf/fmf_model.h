@@ -32,6 +32,15 @@ constexpr float k_drr_eps = 1e-5f;  // Bonn's dynamic-range-reduction epsilon (n
 // M = [1 0 1.13983; 1 -0.39465 -0.5806; 1 2.03211 0] (the inverse is in fmf_color.cpp).
 constexpr float k_rgb_from_yuv[3][3] = {{1, 0, 1.13983f}, {1, -0.39465f, -0.5806f}, {1, 2.03211f, 0}};
 
+// color=dfmf's inverse once the exponential is taken: from ex = exp(Y'), U', V' and the offset e,
+// Y = ex - e, (U, V) = (U', V') (Y + e), then RGB. FmfModel::undecorrelate (std::exp) and the
+// random-query path (fmf_eval_dfmf.cpp, a polynomial exp) share it.
+inline void dfmf_rgb(float ex, float u, float v, float e, float* rgb) {
+  const float y = ex - e;
+  const float yuv[3] = {y, u * (y + e), v * (y + e)};
+  for (int c = 0; c < 3; ++c) rgb[c] = k_rgb_from_yuv[c][0] * yuv[0] + k_rgb_from_yuv[c][1] * yuv[1] + k_rgb_from_yuv[c][2] * yuv[2];
+}
+
 // The parameter table (fmf.cpp).
 std::span<const ParamSpec> params_table();
 
@@ -141,10 +150,7 @@ class FmfModel final : public Model {
  private:
   void undecorrelate(const float* ylog_u_v, float* rgb) const {
     if (m_cfg.color_model >= 0) return bonn_undecorrelate(m_cfg, ylog_u_v, rgb);
-    const float e = m_cfg.offset, y = std::exp(ylog_u_v[0]) - e;
-    const float yuv[3] = {y, ylog_u_v[1] * (y + e), ylog_u_v[2] * (y + e)};
-    for (int c = 0; c < 3; ++c)
-      rgb[c] = k_rgb_from_yuv[c][0] * yuv[0] + k_rgb_from_yuv[c][1] * yuv[1] + k_rgb_from_yuv[c][2] * yuv[2];
+    dfmf_rgb(std::exp(ylog_u_v[0]), ylog_u_v[1], ylog_u_v[2], m_cfg.offset, rgb);
   }
 
   // The OpenCL kernels (kernels/fmf.cl) hard-code Bonn's offset 1e-5: other dfmf offsets decode
