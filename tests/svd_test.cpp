@@ -208,6 +208,48 @@ TEST(Svd, ColumnSketchEqualsTheRowSketchOfTheTranspose) {
   }
 }
 
+// The whole first pass, Y = B S G (sparse sketch, W G by pieces of rows on the threads): the same
+// bits on one thread and on all, within float round-off of (B S) G in double, and the chunks'
+// parts (texels [first, first + n) of the sketch's) summing to the whole. Rows span several of
+// the sketch's row blocks and W G's pieces.
+TEST(Svd, ColumnSketchProductIsThreadCountFreeAndSumsOverChunks) {
+  const size_t m = 9000, n = 3000;
+  const Eigen::Index l = 48;  // s = 256: row blocks of 562 rows, W G in pieces of 512 and 50
+  std::mt19937_64 rng(21);
+  std::uniform_real_distribution<float> u(-1.f, 1.f);
+  std::vector<float> b(m * n);
+  for (float& x : b) x = u(rng);
+  SvdOptions o;
+  o.seed = 3;
+  const Sketch sk = make_column_sketch(n, l, o);
+  ASSERT_TRUE(sk.sparse());
+  Eigen::MatrixXf y(Eigen::Index(m), l), y1(Eigen::Index(m), l);
+  double e = 0, e1 = 0;
+  column_sketch_product(b.data(), m, n, sk, y, &e);
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(1);
+  column_sketch_product(b.data(), m, n, sk, y1, &e1);
+  omp_set_num_threads(threads);
+  ASSERT_EQ(0, std::memcmp(y.data(), y1.data(), size_t(y.size()) * sizeof(float)));
+  EXPECT_EQ(e, e1);
+  // Reference: W = B S (each column of B into its bucket, signed), then W G, in double.
+  Eigen::MatrixXd w = Eigen::MatrixXd::Zero(Eigen::Index(m), Eigen::Index(sk.S.s));
+  std::vector<float> wf(m * sk.S.s);
+  sparse_sign_columns(b.data(), m, m, n, sk.S, wf.data());
+  for (size_t i = 0; i < wf.size(); ++i) w.data()[i] = wf[i];
+  const Eigen::MatrixXd ref = w * sk.G.cast<double>();
+  EXPECT_LT((y.cast<double>() - ref).norm(), 1e-5 * ref.norm());
+  double energy = 0;
+  for (float x : b) energy += double(x) * double(x);
+  EXPECT_NEAR(e, energy, 1e-9 * energy);
+  // Two chunks of texels sum to the whole (to round-off: each part is its own GEMM).
+  Eigen::MatrixXf a(Eigen::Index(m), l), c(Eigen::Index(m), l);
+  const size_t split = 1234;
+  column_sketch_product(b.data(), m, split, sk, a, nullptr, 0);
+  column_sketch_product(b.data() + split * m, m, n - split, sk, c, nullptr, split);
+  EXPECT_LT(((a + c) - y).norm(), 1e-5 * y.norm());
+}
+
 TEST(Svd, BlockKrylovStopsEarlyOnAFastDecayAndHandlesExhaustedRanges) {
   // Rank-60 structure + small noise: the first blocks reach the optimum, later ones add nothing.
   const size_t m = 700, n = 900;
