@@ -162,7 +162,7 @@ TEST(StreamingDfmf, VectorizedTransformIsTheDefinition) {
   EXPECT_TRUE(std::isnan(y[2]));
 }
 
-// This CPU's kernels (AVX2 / AVX-512 by hand or by the compiler) against the portable builds:
+// This CPU's kernels (AVX-512 or AVX2, by hand; the AVX2 ones also on AVX-512 CPUs) against the portable builds:
 // the channels bit for bit, the moments to rounding and the same flag, for every length's tail
 // (0-40 rows) and a texel's 6561, over HDR values with negatives, zeros, denormals, inf and NaN.
 TEST(StreamingDfmf, ChannelKernelsMatchThePortableBuild) {
@@ -185,6 +185,12 @@ TEST(StreamingDfmf, ChannelKernelsMatchThePortableBuild) {
         const size_t cb = dfmf_channels_reference(rgb.data(), rows, offset, b.data(), b.data() + rows, b.data() + 2 * rows);
         EXPECT_EQ(ca, cb) << rows << " rows, offset " << offset;
         ASSERT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(float)), 0) << rows << " rows, offset " << offset << ", odd " << odd;
+        size_t c2 = 0;  // the AVX2 kernel too where it runs (an AVX-512 CPU takes its own above)
+        std::fill(a.begin(), a.end() - 1, -7.f);  // not the guard value past the channels
+        if (dfmf_channels_avx2(rgb.data(), rows, offset, a.data(), a.data() + rows, a.data() + 2 * rows, &c2)) {
+          EXPECT_EQ(c2, cb) << rows << " rows, offset " << offset << " (AVX2)";
+          ASSERT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(float)), 0) << rows << " rows, offset " << offset << ", odd " << odd << " (AVX2)";
+        }
       }
       double sa[2] = {0.5, 0.25}, sb[2] = {0.5, 0.25};
       const bool ba = dfmf_luminance_moments(rgb.data(), rows, &sa[0], &sa[1]);
@@ -195,6 +201,15 @@ TEST(StreamingDfmf, ChannelKernelsMatchThePortableBuild) {
         if (std::isfinite(sb[k])) {
           EXPECT_NEAR(sa[k], sb[k], 1e-12 * std::fabs(sb[k])) << rows << " rows, sum " << k;
         }
+      double s2[2] = {0.5, 0.25};
+      bool b2 = false;
+      if (dfmf_luminance_moments_avx2(rgb.data(), rows, &s2[0], &s2[1], &b2)) {
+        EXPECT_EQ(b2, bb) << rows << " rows, odd " << odd << " (AVX2)";
+        for (int k = 0; k < 2; ++k)
+          if (std::isfinite(sb[k])) {
+            EXPECT_NEAR(s2[k], sb[k], 1e-12 * std::fabs(sb[k])) << rows << " rows, sum " << k << " (AVX2)";
+          }
+      }
     }
 }
 

@@ -140,6 +140,11 @@ double dfmf_auto_offset(double sum_y, double sum_y2);
 // rounding (its lanes add in another order).
 size_t dfmf_channels_reference(const float* abrdf, size_t rows, float offset, float* y, float* u, float* v);
 bool dfmf_luminance_moments_reference(const float* abrdf, size_t rows, double* sum_y, double* sum_y2);
+// For tests: the AVX2 kernels of the two on any CPU with AVX2 + FMA (an AVX-512 CPU runs its own
+// otherwise, so they would go untested there). False where they do not apply (nothing written);
+// else *clamped / *bad get what dfmf_channels / dfmf_luminance_moments return.
+bool dfmf_channels_avx2(const float* abrdf, size_t rows, float offset, float* y, float* u, float* v, size_t* clamped);
+bool dfmf_luminance_moments_avx2(const float* abrdf, size_t rows, double* sum_y, double* sum_y2, bool* bad);
 // `p` (a color=dfmf fmf spec) with offset = `offset`: the spec a model of that offset carries.
 Result<Params> dfmf_with_offset(const Params& p, double offset);
 

@@ -394,6 +394,17 @@ size_t dfmf_channels_reference(const float* abrdf, size_t rows, float offset, fl
   return channels_generic(abrdf, rows, offset, y, u, v);
 }
 
+bool dfmf_channels_avx2(const float* abrdf, size_t rows, float offset, float* y, float* u, float* v, size_t* clamped) {
+#if defined(__x86_64__) && defined(__GNUC__)
+  if (!cpu_has_avx2_fma()) return false;
+  *clamped = channels_avx2(abrdf, rows, offset, y, u, v);
+  return true;
+#else
+  (void)abrdf, (void)rows, (void)offset, (void)y, (void)u, (void)v, (void)clamped;
+  return false;
+#endif
+}
+
 size_t dfmf_channel(const float* abrdf, size_t rows, int k, float offset, float* out) {
   // dfmf_channels in blocks, keeping channel k: the same bits as the fused path.
   constexpr size_t k_block = 512;
@@ -507,6 +518,17 @@ bool dfmf_luminance_moments(const float* abrdf, size_t rows, double* sum_y, doub
 
 bool dfmf_luminance_moments_reference(const float* abrdf, size_t rows, double* sum_y, double* sum_y2) {
   return moments_generic(abrdf, rows, sum_y, sum_y2);
+}
+
+bool dfmf_luminance_moments_avx2(const float* abrdf, size_t rows, double* sum_y, double* sum_y2, bool* bad) {
+#if defined(__x86_64__) && defined(__GNUC__)
+  if (!cpu_has_avx2_fma()) return false;
+  *bad = moments_avx2(abrdf, rows, sum_y, sum_y2);
+  return true;
+#else
+  (void)abrdf, (void)rows, (void)sum_y, (void)sum_y2, (void)bad;
+  return false;
+#endif
 }
 
 double dfmf_auto_offset(double sum_y, double sum_y2) {
