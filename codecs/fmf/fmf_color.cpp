@@ -229,6 +229,13 @@ size_t channels_generic(const float* abrdf, size_t rows, float offset, float* y,
 // its own. Scratch harness, parts as the encode's: 64 rows ahead 1.45-1.6 ns, 128 1.3-1.5,
 // 192-1024 1.4-1.6 (AVX2 build: 2.3-2.5 without).
 constexpr size_t k_channels_ahead = 128;
+// Asks for the cache lines of rows [r + k_channels_ahead, + n) while rows r.. compute, when they
+// lie within the `rows` of this call.
+__attribute__((always_inline)) inline void prefetch_ahead(const float* abrdf, size_t r, size_t n, size_t rows) {
+  if (r + k_channels_ahead + n > rows) return;
+  const uintptr_t first = reinterpret_cast<uintptr_t>(abrdf + 3 * (r + k_channels_ahead));
+  for (uintptr_t a = first & ~uintptr_t(63); a < first + 12 * n; a += 64) _mm_prefetch(reinterpret_cast<const char*>(a), _MM_HINT_T0);
+}
 
 // Rows r..r+7 of an RGB-triple array (24 floats from p) as R, G, B lanes: R sits in lanes
 // {0,3,6} of the first load, {1,4,7} of the second and {2,5} of the third, so two blends gather
@@ -266,7 +273,6 @@ __attribute__((target("avx2"), always_inline)) inline __m256 log_normal8(__m256 
   return _mm256_add_ps(_mm256_add_ps(m, y), _mm256_mul_ps(_mm256_set1_ps(k_log_e_hi), fe));
 }
 __attribute__((target("avx2"))) size_t channels_avx2(const float* abrdf, size_t rows, float offset, float* y, float* u, float* v) {
-  constexpr size_t k_ahead = k_channels_ahead;
   const __m256 off = _mm256_set1_ps(offset), zero = _mm256_setzero_ps();
   const __m256 lo = _mm256_set1_ps(1.17549435e-38f), hi = _mm256_set1_ps(3.40282347e38f);
   size_t clamped = 0, r = 0;
@@ -274,10 +280,7 @@ __attribute__((target("avx2"))) size_t channels_avx2(const float* abrdf, size_t 
   while (r + 8 <= rows) {
     __m256i count = _mm256_setzero_si256();  // per lane, flushed every 2^28 groups
     for (size_t g = 0; g < (size_t(1) << 28) && r + 8 <= rows; ++g, r += 8) {
-      if (r + k_ahead + 8 <= rows) {  // 8 rows are 1.5 cache lines: the line of each end
-        const char* p = reinterpret_cast<const char*>(abrdf + 3 * (r + k_ahead));
-        _mm_prefetch(p, _MM_HINT_T0), _mm_prefetch(p + 95, _MM_HINT_T0);
-      }
+      prefetch_ahead(abrdf, r, 8, rows);
       __m256 R, G, B;
       rgb8(abrdf + 3 * r, R, G, B);
       const __m256 l = dot3(k_yuv.m[0], R, G, B);
@@ -342,10 +345,9 @@ __attribute__((target("avx512f"), always_inline)) inline __m512 log_normal16(__m
   y = _mm512_add_ps(y, _mm512_mul_ps(_mm512_set1_ps(-0.5f), z));
   return _mm512_add_ps(_mm512_add_ps(m, y), _mm512_mul_ps(_mm512_set1_ps(k_log_e_hi), fe));
 }
-// By hand as channels_avx2, so that it can prefetch (k_channels_ahead); the same bits as
+// By hand as channels_avx2, so that it can prefetch (prefetch_ahead); the same bits as
 // channels_body (tests/ooc_dfmf_test.cpp compares them).
 __attribute__((target("avx512f"))) size_t channels_avx512(const float* abrdf, size_t rows, float offset, float* y, float* u, float* v) {
-  constexpr size_t k_ahead = k_channels_ahead;
   const __m512 off = _mm512_set1_ps(offset), zero = _mm512_setzero_ps();
   const __m512 lo = _mm512_set1_ps(1.17549435e-38f), hi = _mm512_set1_ps(3.40282347e38f);
   __m512i count = _mm512_setzero_si512();  // per lane: at most rows / 16 < 2^32 each
@@ -353,8 +355,7 @@ __attribute__((target("avx512f"))) size_t channels_avx512(const float* abrdf, si
   size_t r = 0;
   for (; r + 16 <= rows; r += 16) {
     const float* p = abrdf + 3 * r;
-    if (r + k_ahead + 16 <= rows)  // 16 rows are 3 cache lines
-      for (int k = 0; k < 3; ++k) _mm_prefetch(reinterpret_cast<const char*>(p + 3 * k_ahead + 16 * k), _MM_HINT_T0);
+    prefetch_ahead(abrdf, r, 16, rows);
     const __m512 v0 = _mm512_loadu_ps(p), v1 = _mm512_loadu_ps(p + 16), v2 = _mm512_loadu_ps(p + 32);
     const __m512 R = channel16(0, v0, v1, v2), G = channel16(1, v0, v1, v2), B = channel16(2, v0, v1, v2);
     const __m512 l = dot3_16(k_yuv.m[0], R, G, B);
@@ -452,8 +453,7 @@ __attribute__((target("avx512f"))) bool moments_avx512(const float* abrdf, size_
   size_t r = 0;
   for (; r + 16 <= rows; r += 16) {
     const float* p = abrdf + 3 * r;
-    if (r + k_channels_ahead + 16 <= rows)  // as channels_avx512
-      for (int k = 0; k < 3; ++k) _mm_prefetch(reinterpret_cast<const char*>(p + 3 * k_channels_ahead + 16 * k), _MM_HINT_T0);
+    prefetch_ahead(abrdf, r, 16, rows);
     const __m512 v0 = _mm512_loadu_ps(p), v1 = _mm512_loadu_ps(p + 16), v2 = _mm512_loadu_ps(p + 32);
     const __m512 R = channel16(0, v0, v1, v2), G = channel16(1, v0, v1, v2), B = channel16(2, v0, v1, v2);
     const __m512 l = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(a0, R), _mm512_mul_ps(a1, G)), _mm512_mul_ps(a2, B));
@@ -482,10 +482,7 @@ __attribute__((target("avx2"))) bool moments_avx2(const float* abrdf, size_t row
   __m256 bad = zero;
   size_t r = 0;
   for (; r + 8 <= rows; r += 8) {
-    if (r + k_channels_ahead + 8 <= rows) {  // as channels_avx2
-      const char* p = reinterpret_cast<const char*>(abrdf + 3 * (r + k_channels_ahead));
-      _mm_prefetch(p, _MM_HINT_T0), _mm_prefetch(p + 95, _MM_HINT_T0);
-    }
+    prefetch_ahead(abrdf, r, 8, rows);
     __m256 R, G, B;
     rgb8(abrdf + 3 * r, R, G, B);
     const __m256 l = dot3(k_yuv.m[0], R, G, B);
