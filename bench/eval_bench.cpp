@@ -19,6 +19,8 @@
 #include <random>
 #include <string>
 
+#include <Imath/half.h>
+
 #include "bench/bench_timing.h"
 #include "codecs/fmf/fmf_cl.h"
 #include "codecs/fmf/fmf_eval.h"
@@ -35,7 +37,7 @@ int main(int argc, char** argv) {
   int texels = 65536, C = 32;
   size_t nq = 4000000;
   bool profile = false;  // --profile 1: only the blend, repeated (for perf)
-  std::string color = "rgb";
+  std::string color = "rgb", precision = "half";
   for (int i = 1; i + 1 < argc; i += 2) {
     std::string a = argv[i];
     if (a == "--texels") texels = std::atoi(argv[i + 1]);
@@ -43,6 +45,7 @@ int main(int argc, char** argv) {
     else if (a == "--queries") nq = size_t(std::atoll(argv[i + 1]));
     else if (a == "--profile") profile = std::atoi(argv[i + 1]) != 0;
     else if (a == "--color") color = argv[i + 1];
+    else if (a == "--precision") precision = argv[i + 1];
   }
   if (color != "rgb" && color != "dfmf") {
     std::fprintf(stderr, "bench_eval: --color %s: expected rgb or dfmf\n", color.c_str());
@@ -126,7 +129,8 @@ int main(int argc, char** argv) {
   b.name = "rgb";
   b.U.resize(Eigen::Index(desc.abrdf_size()), C);
   b.SxV.resize(texels, C);
-  for (Eigen::Index i = 0; i < b.U.size(); ++i) b.U.data()[i] = u(rng);
+  // U's values as a default (precision=half) model stores them, unless --precision float.
+  for (Eigen::Index i = 0; i < b.U.size(); ++i) b.U.data()[i] = precision == "half" ? float(Imath::half(u(rng))) : u(rng);
   for (Eigen::Index i = 0; i < b.SxV.size(); ++i) b.SxV.data()[i] = u(rng);
   b.S = Eigen::VectorXf::Ones(C), b.scale = Eigen::VectorXf::Ones(C);
   fmf::Config cfg;

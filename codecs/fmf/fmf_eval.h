@@ -11,6 +11,10 @@
 // queries with identical weights (a renderer's frame under one light and view) blends once.
 // Results go back in the queries' order. The blend has an AVX-512 kernel and an AVX2 kernel
 // (fmf_eval.cpp); FmfModel hands it a copy of U and SxV on huge pages (eval_factors()).
+// When every value of U is a half float (precision=half, the default, rounds U so) the copy
+// holds U as halves too (1.27 MB for UBO2003 at rank 32, inside a 2 MB L2), and an AVX-512 CPU
+// blends the queries in their own order from it, unsorted: with U in L2 the sort and the
+// scatter back cost more than they save (docs/benchmarks.md, 32 -> 37 M evals/s).
 //
 // Contract: out[i * nc + c] equals the reference blend of eval_dir (per pair eval() sums, in
 // (a, b) order) to float rounding: the blend order differs (rows first, then the dot), and the
@@ -28,6 +32,7 @@ namespace btfc::fmf {
 struct EvalFactors {
   const float* U = nullptr;
   const float* SxV = nullptr;
+  const uint16_t* Uh = nullptr;  // U as half floats (IEEE binary16 bits), when each value is one
   int C = 0, nc = 3, nL = 0, nV = 0;
 };
 

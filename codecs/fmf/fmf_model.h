@@ -192,6 +192,7 @@ class FmfModel final : public Model {
   mutable std::shared_ptr<fmf_cl::DeviceFactors> m_cl;
   mutable std::once_flag m_eval_once;
   mutable std::shared_ptr<float> m_eval_copy;
+  mutable const uint16_t* m_eval_half = nullptr;  // in m_eval_copy: U as halves, when exact
   // color=dfmf's copy for eval_batch_dfmf_cpu: the three blocks interleaved, on huge pages.
   mutable std::once_flag m_dfmf_once;
   mutable std::shared_ptr<float> m_dfmf_copy;
