@@ -62,6 +62,21 @@ int main(int argc, char** argv) {
               set.c_str(), dirs.size(), in.triangles().size(), in.fine_grid().n, nq, theta_max, build_ms);
   std::printf("  weights():           %6.2f ns/call\n", fast);
   std::printf("  weights_reference(): %6.2f ns/call  (%.1fx)\n", ref, ref / fast);
+  // weights_batch in groups of 256, as FmfModel::eval_batch calls it.
+  auto batch_ns = [&](const std::vector<Vec3>& v) {
+    std::vector<DirWeights> out(256);
+    double best = 1e30;
+    for (int r = 0; r < 5; ++r) {
+      const double t = now_s();
+      for (size_t i = 0; i < v.size(); i += 256) {
+        in.weights_batch(v.data() + i, std::min<size_t>(256, v.size() - i), out.data());
+        sink += out[0].weight[1];
+      }
+      best = std::min(best, now_s() - t);
+    }
+    return best / double(v.size()) * 1e9;
+  };
+  std::printf("  weights_batch():     %6.2f ns/call\n", batch_ns(q));
   // Per kind of answer, on the queries of that kind alone (branches then predict well).
   const char* names[4] = {"search", "triangle", "hull edges", "candidates"};
   for (int k = 0; k < 4; ++k) {
@@ -71,7 +86,8 @@ int main(int argc, char** argv) {
     if (sub.empty()) continue;
     const double t = ns_per_call(sub, 5, [&](const Vec3& d) { return in.weights(d); }, sink);
     const double tr = ns_per_call(sub, 5, [&](const Vec3& d) { return in.weights_reference(d); }, sink);
-    std::printf("    %-10s %5.1f%%: weights() %6.2f ns/call, reference %6.2f\n", names[k], 100.0 * double(sub.size()) / double(nq), t, tr);
+    std::printf("    %-10s %5.1f%%: weights() %6.2f ns/call, reference %6.2f, batch %6.2f\n", names[k], 100.0 * double(sub.size()) / double(nq),
+                t, tr, batch_ns(sub));
   }
   std::printf("  the table answers %.1f%% of calls (%.1f%% with one triangle), the search %.1f%%  (checksum %.6g)\n",
               100.0 * double(nq - kinds[0]) / double(nq), 100.0 * double(kinds[1]) / double(nq),

@@ -576,12 +576,13 @@ void DirectionInterpolator::weights_batch(const Vec3* dir, size_t n, DirWeights*
   if (c <= k_multi_base) {
     // Candidates in the search's order: the first that accepts p is what the search returns; if
     // none does, the search goes on past them (to candidates that reject p) to the hull.
+    // On the triangles' own copies of their points (bary()'s doubles, one dependent load less).
     for (int k = 0; k < k_multi; ++k) {
       const int ti = ft.multi[size_t(k_multi_base - c) * k_multi + size_t(k)];
       if (ti < 0) break;
-      const auto& t = m_tris[size_t(ti)];
-      const std::array<double, 3> w = bary(m_pts, t, p);
-      if (min3(w) >= -k_inside_tol) return make_weights(t, w);
+      const CornerTri& t = ft.corner_tris[size_t(ti)];
+      const std::array<double, 3> w = {cross(t.b, t.c, p), cross(t.c, t.a, p), cross(t.a, t.b, p)};
+      if (min3(w) >= -k_inside_tol) return make_weights(t.index, w);
     }
     return weights_at(p);
   }
