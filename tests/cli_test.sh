@@ -154,6 +154,12 @@ check export-bsvtf-info 0 "$BTFC" tilecache "$W/exp-fmf/model.bsvtf" --cache-til
 check export-not-empty 1 "$BTFC" export "$W/m.btfc" --to "$W/exp-fmf"
 check export-raw 1 "$BTFC" export "$W/s.btfc" --to "$W/exp-raw"
 [ ! -e "$W/exp-raw" ] && [ ! -e "$W/exp-raw.tmp-export" ] && echo "ok   export-no-output" || { echo "FAIL export-no-output"; fails=$((fails + 1)); }
+# dfmf with the default offset (from the data): textures and shader carry it; BSVTF cannot (a warning)
+check compress-dfmf-auto 0 "$BTFC" compress "$W/s.btfc" -c fmf:color=dfmf:rank=6:chroma_rank=2 -o "$W/dfa.btfc"
+check export-dfmf-auto 0 "$BTFC" export "$W/dfa.btfc" --to "$W/exp-dfa" --no-previews
+expect_grep export-dfmf-auto-warn "model.bsvtf not written" "$W/err.txt"
+expect_grep export-dfmf-auto-shader "const float DFMF_OFFSET" "$W/exp-dfa/btf.frag"
+[ -s "$W/exp-dfa/eigen_texture.ktx2" ] && [ ! -e "$W/exp-dfa/model.bsvtf" ] && echo "ok   export-dfmf-auto-files" || { echo "FAIL export-dfmf-auto-files"; fails=$((fails + 1)); }
 cat >"$W/scene.json" <<'JSON'
 {"materials": [{"name": "floor", "footprint": [2, 8], "view_cone": {"theta": 0, "phi": 0, "angle": 30}, "gpu_budget": "4M"}]}
 JSON

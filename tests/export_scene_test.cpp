@@ -132,7 +132,8 @@ TEST(Scene, SceneModelIsWhatTheExportKeeps) {
   // levels, components and directions of the KTX2 export (float storage: float rounding only).
   const Btf b = synth_ubo(16, 12);
   const double rms = rms_of(b);
-  for (const std::string spec : {"fmf:rank=12:precision=float", "fmf:color=dfmf:rank=8:chroma_rank=4:precision=float:offset=1e-5"}) {
+  for (const std::string spec : {"fmf:rank=12:precision=float", "fmf:color=dfmf:rank=8:chroma_rank=4:precision=float:offset=1e-5",
+                                 "fmf:color=dfmf:rank=8:chroma_rank=4:precision=float"}) {
     auto m = encode_spec(b, spec);
     ASSERT_TRUE(m);
     ExportOptions o;

@@ -7,6 +7,8 @@
 #include <random>
 
 #include "codecs/codec.h"
+#include "codecs/fmf/fmf.h"
+#include "codecs/gpu_export.h"
 #include "core/interp.h"
 #include "core/synth.h"
 #include "formats/gpu/export.h"
@@ -192,8 +194,10 @@ TEST(GpuTexture, HalfOverflowIsScaledOrClampedAndCounted) {
 TEST(FmfExport, EmulationEqualsModelRgbAndDfmf) {
   const Btf b = synth_ubo(19, 11);
   const double rms = rms_of(b);
+  // dfmf with Bonn's offset and with the default one from the data (the shader's DFMF_OFFSET).
   for (const std::string spec : {"fmf:rank=9", "fmf:color=dfmf:rank=6:chroma_rank=3:offset=1e-5", "fmf:rank=9:precision=float",
-                                 "fmf:color=dfmf:rank=6:chroma_rank=3:precision=float:offset=1e-5"}) {
+                                 "fmf:color=dfmf:rank=6:chroma_rank=3:precision=float:offset=1e-5", "fmf:color=dfmf:rank=6:chroma_rank=3",
+                                 "fmf:color=dfmf:rank=6:chroma_rank=3:precision=float"}) {
     auto m = encode_spec(b, spec);
     ASSERT_TRUE(m);
     const bool half_model = spec.find("precision=float") == std::string::npos;
@@ -219,6 +223,12 @@ TEST(FmfExport, EmulationEqualsModelRgbAndDfmf) {
     EXPECT_TRUE(bh->warnings.empty());
     EXPECT_NE(bh->glsl.find("vec3 btf_eval(vec2 uv, vec3 wl, vec3 wv)"), std::string::npos);
     EXPECT_NE(bh->glsl.find("#ifndef BTFC_NO_MAIN"), std::string::npos);
+    if (spec.find("dfmf") != std::string::npos) {
+      const float e = bh->evaluation.at("luminance_offset").get<float>();
+      EXPECT_EQ(e, fmf_factors(*m)->drr_eps) << spec;
+      EXPECT_EQ(e == 1e-5f, spec.find("offset=1e-5") != std::string::npos) << spec << ": offset " << e;
+      EXPECT_NE(bh->glsl.find("const float DFMF_OFFSET = " + glsl_float(e) + ";"), std::string::npos) << spec;
+    }
   }
 }
 

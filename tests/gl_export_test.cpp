@@ -63,6 +63,7 @@ const Case k_cases[] = {
     {"fmf", "rgb", "fmf:rank=6", 1, true, 1, false},
     {"fmf", "rgb_float_factors", "fmf:rank=6:precision=float", 1, true, 1, true},
     {"fmf", "dfmf", "fmf:color=dfmf:rank=6:chroma_rank=3:precision=float:offset=1e-5", 1, true, 2, true},
+    {"fmf", "dfmf_auto_offset", "fmf:color=dfmf:rank=6:chroma_rank=3:precision=float", 1, true, 2, true},
     {"fmf", "hdr", "fmf:rank=6:precision=float", 1e6f, true, 1, true},
     {"fmf", "rgba32f", "fmf:rank=6:precision=float", 1, false, 1, false},
     {"lpyr", "ldr", "lpyr:y=4:c=1", 1, true, 1, false},

@@ -82,8 +82,11 @@ struct FmfFactors {
 // The model's spec is the equivalent fmf spec ("fmf:color=dfmf:..." for 11, "color=rgb" for one
 // block with model 0), so it saves to .btfc; other colour models cannot be saved to .btfc
 // (save() answers unsupported) but decode, eval and re-compress normally.
+// `dfmf_offset`: the luminance offset e of per-channel blocks in colour model 11 (Bonn files:
+// 1e-5; a cut of a btfc dfmf model whose e came from the data: that e).
 Result<std::unique_ptr<Model>> make_fmf_model(const BtfDesc& desc, int bonn_color_model, std::vector<FmfFactors> blocks,
-                                              const float color_mean[3], const float color_transform[3][3], bool half);
+                                              const float color_mean[3], const float color_transform[3][3], bool half,
+                                              float dfmf_offset = 1e-5f);
 
 // Read-only view of an fmf model's factors, valid while the model lives (for the Bonn writers).
 struct FmfBlockView {

@@ -80,8 +80,11 @@ void bonn_undecorrelate(const Config& cfg, const float* in, float* rgb) {
 using namespace fmf;
 
 Result<std::unique_ptr<Model>> make_fmf_model(const BtfDesc& desc, int cm, std::vector<FmfFactors> in,
-                                              const float color_mean[3], const float color_transform[3][3], bool half) {
+                                              const float color_mean[3], const float color_transform[3][3], bool half,
+                                              float dfmf_offset) {
   BTFC_RETURN_IF_ERROR(desc.validate());
+  if (!(std::isfinite(dfmf_offset) && dfmf_offset > 0))
+    return invalid_argument("fmf: dfmf luminance offset " + std::to_string(dfmf_offset) + " is not a positive number");
   const bool per_channel = in.size() == 3;
   if (in.size() != 1 && !per_channel)
     return invalid_argument("fmf: a Bonn factorization needs 1 (rgb) or 3 (per channel) blocks, got " + std::to_string(in.size()));
@@ -123,13 +126,17 @@ Result<std::unique_ptr<Model>> make_fmf_model(const BtfDesc& desc, int cm, std::
     if (!b.U.allFinite() || !b.SxV.allFinite()) return corrupt_data(what + " holds non-finite values");
     blocks.push_back(std::move(b));
   }
+  char eps[32];  // the luminance offset (colour model 11's, or a btfc model's own), not "automatic"
+  const float e = per_channel && cm == 11 ? dfmf_offset : k_drr_eps;
+  if (e == k_drr_eps) std::snprintf(eps, sizeof eps, "%s", std::to_string(k_drr_eps).c_str());  // as before: "0.000010"
+  else std::snprintf(eps, sizeof eps, "%.9g", double(e));
   std::string text = per_channel ? "rank=" + std::to_string(blocks[0].U.cols()) + ":chroma_rank=" +
-                                       std::to_string(std::max(blocks[1].U.cols(), blocks[2].U.cols())) + ":color=dfmf:offset=" +
-                                       std::to_string(k_drr_eps)  // the file's luminance offset (colour model 11's), not "automatic"
+                                       std::to_string(std::max(blocks[1].U.cols(), blocks[2].U.cols())) + ":color=dfmf:offset=" + eps
                                  : "rank=" + std::to_string(blocks[0].U.cols()) + ":color=rgb";
   text += half ? ":precision=half" : ":precision=float";
   BTFC_ASSIGN_OR_RETURN(auto spec, parse_spec_string("fmf:" + text));
   BTFC_ASSIGN_OR_RETURN(Params p, bind_params(spec, params_table()));
+  cfg.offset = config_from(p).offset;
   auto model = std::make_unique<FmfModel>(desc, p.canonical(), cfg, std::move(blocks));
   for (const Block& b : model->blocks()) model->mutable_stats().add("rank." + b.name, double(b.U.cols()));
   model->mutable_stats().add("bonn_color_model", cm);

@@ -24,7 +24,8 @@ constexpr float k_drr_eps = 1e-5f;
 constexpr float k_rgb_from_yuv[3][3] = {{1, 0, 1.13983f}, {1, -0.39465f, -0.5806f}, {1, 2.03211f, 0}};
 
 struct Layout {
-  int mode = 0;  // 0: rgb block, linear; 12: rgb block, exp(v) - eps; 11: dfmf y/u/v
+  int mode = 0;  // 0: rgb block, linear; 12: rgb block, exp(v) - 1e-5; 11: dfmf y/u/v
+  float eps = k_drr_eps;  // mode 11: the model's luminance offset e (Bonn's 1e-5 or from the data)
   int nb = 1;
   int K[3] = {0, 0, 0}, R[3] = {0, 0, 0}, toff[3] = {0, 0, 0}, aoff[3] = {0, 0, 0};
   int tex_layers = 0, abrdf_layers = 0;
@@ -34,6 +35,7 @@ Layout layout_of(const ExportBundle& b) {
   const nlohmann::json& e = b.evaluation;
   Layout L;
   L.mode = e.at("color_mode").get<int>();
+  if (L.mode == 11) L.eps = e.at("luminance_offset").get<float>();
   L.nb = int(e.at("blocks").size());
   for (int i = 0; i < L.nb; ++i) {
     const nlohmann::json& bl = e.at("blocks")[size_t(i)];
@@ -69,8 +71,8 @@ void measured(const ExportBundle& b, const Layout& L, int x, int y, int l, int v
     }
     return;
   }
-  const float Y = std::exp(block_value(T, A, cs, L, 0, 0, x, y, l, v)) - k_drr_eps;
-  const float yuv[3] = {Y, block_value(T, A, cs, L, 1, 0, x, y, l, v) * (Y + k_drr_eps), block_value(T, A, cs, L, 2, 0, x, y, l, v) * (Y + k_drr_eps)};
+  const float Y = std::exp(block_value(T, A, cs, L, 0, 0, x, y, l, v)) - L.eps;
+  const float yuv[3] = {Y, block_value(T, A, cs, L, 1, 0, x, y, l, v) * (Y + L.eps), block_value(T, A, cs, L, 2, 0, x, y, l, v) * (Y + L.eps)};
   for (int c = 0; c < 3; ++c) rgb[c] = k_rgb_from_yuv[c][0] * yuv[0] + k_rgb_from_yuv[c][1] * yuv[1] + k_rgb_from_yuv[c][2] * yuv[2];
 }
 
@@ -105,6 +107,7 @@ std::string shader(const ExportBundle& b, const Layout& L) {
        "  for (int j = 0; j < K; ++j)\n"
        "    s += dot(texelFetch(u_eigen_texture, ivec3(xy, toff + j), 0) * CSCALE[toff + j], texelFetch(u_eigen_abrdf, ivec3(lv, aoff + j), 0));\n"
        "  return s;\n}\n";
+  if (L.mode == 11) s += "const float DFMF_OFFSET = " + f(L.eps) + ";  // e of Y' = log(Y + e), U' = U / (Y + e)\n";
   s += "vec3 fmf_measured(ivec2 xy, int l, int v) {\n  ivec2 lv = ivec2(l, v);\n  vec3 c = vec3(0.0);\n";
   auto blk = [&](int i, int r) {
     return "fmf_block(" + std::to_string(L.toff[i]) + ", " + std::to_string(L.aoff[i] + r * L.K[i]) + ", " + std::to_string(L.K[i]) + ", xy, lv)";
@@ -116,8 +119,8 @@ std::string shader(const ExportBundle& b, const Layout& L) {
       s += "  c[" + std::to_string(c) + "] = " + v + ";\n";
     }
   } else {
-    s += "  float Y = exp(" + blk(0, 0) + ") - " + f(k_drr_eps) + ";\n";
-    s += "  vec3 yuv = vec3(Y, " + blk(1, 0) + " * (Y + " + f(k_drr_eps) + "), " + blk(2, 0) + " * (Y + " + f(k_drr_eps) + "));\n";
+    s += "  float Y = exp(" + blk(0, 0) + ") - DFMF_OFFSET;\n";
+    s += "  vec3 yuv = vec3(Y, " + blk(1, 0) + " * (Y + DFMF_OFFSET), " + blk(2, 0) + " * (Y + DFMF_OFFSET));\n";
     for (int c = 0; c < 3; ++c)
       s += "  c[" + std::to_string(c) + "] = " + f(k_rgb_from_yuv[c][0]) + " * yuv.x + " + f(k_rgb_from_yuv[c][1]) + " * yuv.y + " +
            f(k_rgb_from_yuv[c][2]) + " * yuv.z;\n";
@@ -186,9 +189,7 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
   L.mode = fv.per_channel ? 11 : fv.bonn_color_model;
   if ((fv.per_channel && fv.bonn_color_model != 11) || (!fv.per_channel && L.mode != 0 && L.mode != 12))
     return unsupported("export: fmf colour model " + std::to_string(fv.bonn_color_model) + " has no shader (rgb and dfmf only)");
-  if (fv.per_channel && fv.drr_eps != 1e-5f)
-    return unsupported("export: the dfmf model's luminance offset is " + std::to_string(fv.drr_eps) +
-                       "; the shaders decode Bonn's colour model 11 (offset 1e-5) only: encode with fmf:color=dfmf:offset=1e-5");
+  if (fv.per_channel) L.eps = fv.drr_eps;
   L.nb = int(fv.blocks.size());
 
   const SceneCut cut = scene_cut(fv, d, opt);
@@ -267,7 +268,7 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
                   {"blocks", blocks},
                   {"formula", "value(b, r) = sum_j dot(eigen_texture[toff_b + j](x, y) * component_scale[toff_b + j], eigen_abrdf[aoff_b + r * layers_b + j](light, view))"},
                   {"component_scale", cscale},
-                  {"color", L.mode == 11 ? "dfmf: Y = exp(value(y)) - 1e-5; U = value(u) (Y + 1e-5); V = value(v) (Y + 1e-5); RGB = M YUV"
+                  {"color", L.mode == 11 ? "dfmf: Y = exp(value(y)) - e; U = value(u) (Y + e); V = value(v) (Y + e); RGB = M YUV; e = luminance_offset"
                             : L.mode == 12 ? "rgb: exp(value(0, c)) - 1e-5" : "rgb: value(0, c)"},
                   {"rgb_from_yuv", {{k_rgb_from_yuv[0][0], k_rgb_from_yuv[0][1], k_rgb_from_yuv[0][2]},
                                     {k_rgb_from_yuv[1][0], k_rgb_from_yuv[1][1], k_rgb_from_yuv[1][2]},
@@ -278,6 +279,7 @@ Result<ExportBundle> build(const Model& model, const ExportOptions& opt) {
                   {"light_indices", ls},
                   {"view_indices", vs},
                   {"first_mip_level", m0}};
+  if (L.mode == 11) b.evaluation["luminance_offset"] = L.eps;
   if (opt.scene) {
     // Eckart-Young: the dropped components' share of the model's energy is the added relative L2.
     nlohmann::json err = nlohmann::json::object();
@@ -314,9 +316,6 @@ Result<std::unique_ptr<Model>> fmf_scene_model(const Model& model, const ExportO
   const BtfDesc& d = model.desc();
   if ((fv.per_channel && fv.bonn_color_model != 11) || (!fv.per_channel && fv.bonn_color_model != 0 && fv.bonn_color_model != 12))
     return unsupported("export: fmf colour model " + std::to_string(fv.bonn_color_model) + " has no scene model (rgb and dfmf only)");
-  if (fv.per_channel && fv.drr_eps != 1e-5f)
-    return unsupported("export: the dfmf model's luminance offset is " + std::to_string(fv.drr_eps) +
-                       "; the shaders decode Bonn's colour model 11 (offset 1e-5) only: encode with fmf:color=dfmf:offset=1e-5");
   const SceneCut cut = scene_cut(fv, d, opt);
   BtfDesc sd = d;
   sd.lights.dirs.clear(), sd.views.dirs.clear();
@@ -350,7 +349,7 @@ Result<std::unique_ptr<Model>> fmf_scene_model(const Model& model, const ExportO
     blocks.push_back(std::move(f));
   }
   sd.width = int(std::max(1, d.width >> cut.m0)), sd.height = int(std::max(1, d.height >> cut.m0));
-  return make_fmf_model(sd, fv.bonn_color_model, std::move(blocks), fv.color_mean, fv.color_transform, fv.half);
+  return make_fmf_model(sd, fv.bonn_color_model, std::move(blocks), fv.color_mean, fv.color_transform, fv.half, fv.drr_eps);
 }
 
 const Exporter k_fmf_exporter = {"fmf", &build, &emulate};

@@ -7,7 +7,15 @@ namespace btfc {
 
 bool attach_bsvtf(gpu::ExportBundle& bundle, const Model& model, const gpu::ExportOptions& opt, const BsvtfOptions& bo,
                   BsvtfReport* report) {
-  if (!fmf_factors(model).ok()) return false;
+  auto fv = fmf_factors(model);
+  if (!fv.ok()) return false;
+  if (fv->per_channel && fv->drr_eps != 1e-5f) {
+    // The textures hold any offset (evaluation.luminance_offset); the pinned BSVTF format holds
+    // colour model 11's only, so the export goes on without it rather than failing.
+    bundle.warnings.push_back("model.bsvtf not written: BSVTF stores Bonn's colour model 11 (luminance offset 1e-5) only, this dfmf model's offset is " +
+                              std::to_string(fv->drr_eps) + " (encode with fmf:color=dfmf:offset=1e-5 for a BSVTF file)");
+    return false;
+  }
   bundle.write_extra = [&model, opt, bo, report](const std::string& dir) -> Result<nlohmann::json> {
     std::unique_ptr<Model> cut;  // a scene keeps only its levels, components and directions
     if (opt.scene) {

@@ -8,7 +8,8 @@
 namespace btfc {
 
 // Sets bundle.write_extra to write model.bsvtf when `model` has factors; `report` (kept alive by
-// the caller until the bundle is written) receives what was written. Returns whether it did.
+// the caller until the bundle is written) receives what was written. Returns whether it did: not
+// for a dfmf model whose luminance offset is not colour model 11's (a warning in the bundle says so).
 bool attach_bsvtf(gpu::ExportBundle& bundle, const Model& model, const gpu::ExportOptions& opt, const BsvtfOptions& bo,
                   BsvtfReport* report);
 
