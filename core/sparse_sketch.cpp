@@ -8,6 +8,8 @@
 
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <immintrin.h>
+
+#include "core/avx512_sums.h"
 #define BTFC_SKETCH_AVX512 1
 #endif
 
@@ -43,10 +45,7 @@ __attribute__((target("avx512f"))) inline void sketch_add_avx512(const uint16_t*
   v = _mm512_mask_sub_ps(v, __mmask16(negative[q]), _mm512_setzero_ps(), v);
   acc = _mm512_add_ps(acc, v);
   if (energy) {
-    const __m512d lo = _mm512_cvtps_pd(_mm512_castps512_ps256(v));
-    const __m512d hi = _mm512_cvtps_pd(_mm512_castps512_ps256(_mm512_shuffle_f32x4(v, v, _MM_SHUFFLE(3, 2, 3, 2))));
-    s0 = _mm512_fmadd_pd(lo, lo, s0);
-    s1 = _mm512_fmadd_pd(hi, hi, s1);
+    add_squares_pd(v, s0, s1);
   }
 }
 
@@ -84,7 +83,7 @@ __attribute__((target("avx512f"))) double sketch_avx512(const float* B, size_t m
         sketch_add_avx512(S.negative.data() + t * q_all, col, q, acc[k], s0, s1, energy && t == 0, std::min<size_t>(16, m - 16 * q));
       }
     for (size_t k = 0; k < groups; ++k) _mm512_storeu_ps(W + j * S.s + 16 * k, acc[k]);
-    if (energy) e += _mm512_reduce_add_pd(_mm512_add_pd(s0, s1));
+    if (energy) e += reduce_add_pd(_mm512_add_pd(s0, s1));
   }
   return e;
 }

@@ -15,6 +15,8 @@
 
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <immintrin.h>
+
+#include "core/avx512_sums.h"
 #define BTFC_THIN_AVX512 1
 #endif
 
@@ -65,13 +67,9 @@ __attribute__((target("avx512f"))) double squares_avx512(const float* p, size_t 
   __m512d s0 = _mm512_setzero_pd(), s1 = _mm512_setzero_pd();
   size_t i = 0;
   for (; i + 16 <= count; i += 16) {
-    const __m512 v = _mm512_loadu_ps(p + i);
-    const __m512d lo = _mm512_cvtps_pd(_mm512_castps512_ps256(v));
-    const __m512d hi = _mm512_cvtps_pd(_mm256_castpd_ps(_mm512_extractf64x4_pd(_mm512_castps_pd(v), 1)));
-    s0 = _mm512_fmadd_pd(lo, lo, s0);
-    s1 = _mm512_fmadd_pd(hi, hi, s1);
+    add_squares_pd(_mm512_loadu_ps(p + i), s0, s1);
   }
-  double s = _mm512_reduce_add_pd(_mm512_add_pd(s0, s1));
+  double s = reduce_add_pd(_mm512_add_pd(s0, s1));
   for (; i < count; ++i) s += double(p[i]) * double(p[i]);
   return s;
 }

@@ -191,7 +191,7 @@ __attribute__((target("avx2,fma"))) void blend_sorted_avx2(const EvalFactors& f,
 // is the float kernel's). Random queries read 27 rows of U each; as halves U takes 1.27 MB for
 // UBO2003 at rank 32 and stays in a 2 MB L2, where the float copy (2.5 MB) spills to L3.
 template <int NC, int PER>
-__attribute__((target("avx512f,fma,f16c"))) void blend_half(const EvalFactors& f, const btfc_fmf_query* s, size_t n, float* out,
+__attribute__((target("avx512f,fma,f16c"))) void blend_half_avx512(const EvalFactors& f, const btfc_fmf_query* s, size_t n, float* out,
                                                           const uint16_t* zero, size_t ahead) {
   constexpr int V = NC * PER;
   constexpr size_t C = 16 * PER, W = NC * C;
@@ -244,7 +244,7 @@ BTFC_CPU_CLONES void eval_weighted_block(const EvalFactors& f, const btfc_fmf_qu
     static const uint16_t zero_half[16 * 8 * 3] = {};
     bool done = false;
 #define BTFC_BLENDH(NC, PER) \
-  if (!done && nc == NC && C == 16 * PER) blend_half<NC, PER>(f, q, n, out, zero_half, 16), done = true;
+  if (!done && nc == NC && C == 16 * PER) blend_half_avx512<NC, PER>(f, q, n, out, zero_half, 16), done = true;
     BTFC_BLENDH(3, 1) BTFC_BLENDH(3, 2) BTFC_BLENDH(3, 3) BTFC_BLENDH(3, 4) BTFC_BLENDH(3, 5) BTFC_BLENDH(3, 8)
     BTFC_BLENDH(1, 1) BTFC_BLENDH(1, 2) BTFC_BLENDH(1, 3) BTFC_BLENDH(1, 4) BTFC_BLENDH(1, 5) BTFC_BLENDH(1, 8)
 #undef BTFC_BLENDH
