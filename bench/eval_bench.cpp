@@ -114,7 +114,7 @@ int main(int argc, char** argv) {
     const std::vector<EvalQuery> cq = coherent_frames(q);
     const double t_coh = best_of(3, [&] { (void)m.eval_batch(cq, out.data()); });
     std::printf("eval_batch, coherent frames           %8.1f M evals/s\n", double(nq) / t_coh / 1e6);
-    // The OpenCL kernel (--device cl; Bonn's offset, which this model has), when a device is present.
+    // The OpenCL kernel (--device cl), when a device is present.
     ocl::set_device_choice(ocl::DeviceChoice::cl);
     if (ocl::Runtime::get().ok() && m.eval_batch(std::span(q).first(1000), out.data()).ok()) {
       const double t_cl = best_of(3, [&] { (void)m.eval_batch(q, out.data()); });

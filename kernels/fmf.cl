@@ -36,33 +36,35 @@ inline float3 fmf_dot3(__global const float* u, __global const float* s, int C) 
   return r;
 }
 
-/* Bonn DFMF colour model 11 inverse: Y = exp(Y') - eps, U = U' (Y + eps), V = V' (Y + eps), then YUV -> RGB. */
-inline float3 fmf_undecorrelate(float ylog, float u, float v) {
-  float y = exp(ylog) - BTFC_DRR_EPS;
-  float s = y + BTFC_DRR_EPS;
+/* The DFMF colour inverse: Y = exp(Y') - eps, U = U' (Y + eps), V = V' (Y + eps), then YUV -> RGB.
+   eps is the model's luminance offset (Bonn's colour model 11: BTFC_DRR_EPS; btfc's default
+   comes from the data). */
+inline float3 fmf_undecorrelate(float ylog, float u, float v, float eps) {
+  float y = exp(ylog) - eps;
+  float s = y + eps;
   u *= s;
   v *= s;
   return (float3)(y + 1.13983f * v, y - 0.39465f * u - 0.5806f * v, y + 2.03211f * u);
 }
 
 inline float3 fmf_value(__global const float* U, __global const float* SxV, int C, int nL, int rows_per_block,
-                        int texels, int mode, int texel, int l, int v) {
+                        int texels, int mode, float eps, int texel, int l, int v) {
   if (mode == BTFC_FMF_RGB) {
     return fmf_dot3(U + (size_t)(3 * (l + nL * v)) * C, SxV + (size_t)texel * C, C);
   }
   size_t r = (size_t)(l + nL * v) * C, t = (size_t)texel * C;
   size_t ub = (size_t)rows_per_block * C, sb = (size_t)texels * C;
   return fmf_undecorrelate(fmf_dot(U + r, SxV + t, C), fmf_dot(U + ub + r, SxV + sb + t, C),
-                           fmf_dot(U + 2 * ub + r, SxV + 2 * sb + t, C));
+                           fmf_dot(U + 2 * ub + r, SxV + 2 * sb + t, C), eps);
 }
 
 /* Evaluation at measured (texel, light, view) triples: q[i] = (texel, light, view, unused). */
 __kernel void fmf_eval_measured(__global const float* U, __global const float* SxV, int C, int nL, int rows_per_block,
-                                int texels, int mode, __global const int4* q, int n, __global float* out) {
+                                int texels, int mode, float eps, __global const int4* q, int n, __global float* out) {
   int i = get_global_id(0);
   if (i >= n) return;
   int4 Q = q[i];
-  float3 rgb = fmf_value(U, SxV, C, nL, rows_per_block, texels, mode, Q.x, Q.y, Q.z);
+  float3 rgb = fmf_value(U, SxV, C, nL, rows_per_block, texels, mode, eps, Q.x, Q.y, Q.z);
   vstore3(rgb, i, out);
 }
 
@@ -73,7 +75,7 @@ __kernel void fmf_eval_measured(__global const float* U, __global const float* S
    horizontal reduction per channel instead of 27 (the reduction dominated at rank 32).
    dfmf is not linear (exp per sample), so it keeps the 9 separate values. */
 __kernel void fmf_eval_interp(__global const float* U, __global const float* SxV, int C, int nL, int rows_per_block,
-                              int texels, int mode, __global const btfc_fmf_query* q, int n, __global float* out) {
+                              int texels, int mode, float eps, __global const btfc_fmf_query* q, int n, __global float* out) {
   int i = get_global_id(0);
   if (i >= n) return;
   btfc_fmf_query Q = q[i];
@@ -121,7 +123,7 @@ __kernel void fmf_eval_interp(__global const float* U, __global const float* SxV
   for (int a = 0; a < 3; ++a)
     for (int b = 0; b < 3; ++b) {
       float w = Q.wl[a] * Q.wv[b];
-      if (w != 0.0f) acc += w * fmf_value(U, SxV, C, nL, rows_per_block, texels, mode, Q.texel, Q.light[a], Q.view[b]);
+      if (w != 0.0f) acc += w * fmf_value(U, SxV, C, nL, rows_per_block, texels, mode, eps, Q.texel, Q.light[a], Q.view[b]);
     }
   vstore3(acc, i, out);
 }
@@ -161,7 +163,8 @@ __kernel void fmf_decode_rgb(__global const float* Ut, __global const float* SX,
 
 /* Decode, dfmf mode: Ut holds 3 blocks (C x dirs each), SX 3 blocks (n x C each); output is
    RGB interleaved per (light, view) row: out[t][3 d + c]. Work-item (strip of 16 dirs, t). */
-__kernel void fmf_decode_dfmf(__global const float* Ut, __global const float* SX, int C, int dirs, int n, __global float* out) {
+__kernel void fmf_decode_dfmf(__global const float* Ut, __global const float* SX, int C, int dirs, int n, float eps,
+                              __global float* out) {
   int d0 = get_global_id(0) * 16, t = get_global_id(1);
   if (t >= n || d0 >= dirs) return;
   __global float* o = out + (size_t)t * dirs * 3;
@@ -179,7 +182,7 @@ __kernel void fmf_decode_dfmf(__global const float* Ut, __global const float* SX
     vstore16(y, 0, yy);
     vstore16(u, 0, uu);
     vstore16(v, 0, vv);
-    for (int j = 0; j < 16; ++j) vstore3(fmf_undecorrelate(yy[j], uu[j], vv[j]), d0 + j, o);
+    for (int j = 0; j < 16; ++j) vstore3(fmf_undecorrelate(yy[j], uu[j], vv[j], eps), d0 + j, o);
   } else {
     for (int d = d0; d < dend; ++d) {
       float y = 0.0f, u = 0.0f, v = 0.0f;
@@ -189,7 +192,7 @@ __kernel void fmf_decode_dfmf(__global const float* Ut, __global const float* SX
         u = mad(SX[sb + (size_t)t * C + k], Ut[ub + off], u);
         v = mad(SX[2 * sb + (size_t)t * C + k], Ut[2 * ub + off], v);
       }
-      vstore3(fmf_undecorrelate(y, u, v), d, o);
+      vstore3(fmf_undecorrelate(y, u, v, eps), d, o);
     }
   }
 }

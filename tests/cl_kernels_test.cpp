@@ -75,10 +75,12 @@ TEST(OpenCLKernels, FmfPairBlendEqualsNineLookups) {
 
 TEST(OpenCLKernels, FmfPairAndBatchKernelsMatchReference) {
   REQUIRE_CL();
-  for (int mode : {BTFC_FMF_RGB, BTFC_FMF_DFMF})
+  // mode 2: dfmf with a luminance offset other than Bonn's (a kernel argument, as the model's).
+  for (int mode : {BTFC_FMF_RGB, BTFC_FMF_DFMF, 2})
     for (int C : {1, 7, 32, 37}) {
       const int nL = 13, nV = 5, texels = 37 * 11;
-      fmf_cl::PackedFactors f = random_factors(mode, C, nL, nV, texels, unsigned(C + 100 * mode));
+      fmf_cl::PackedFactors f = random_factors(std::min(mode, int(BTFC_FMF_DFMF)), C, nL, nV, texels, unsigned(C + 100 * mode));
+      if (mode == 2) f.eps = 0.37f;
       auto dev = fmf_cl::DeviceFactors::upload(f);
       ASSERT_TRUE(dev.ok()) << dev.status().message();
       std::mt19937 rng(11);
@@ -143,6 +145,44 @@ TEST(OpenCLKernels, FmfModelCoherentBatchMatchesCpuPath) {
   ASSERT_TRUE(m.value()->eval_batch(q, cl.data()).ok());
   ocl::set_device_choice(ocl::DeviceChoice::automatic);
   EXPECT_LE(rel_diff(cl, cpu), k_tol);
+}
+
+TEST(OpenCLKernels, FmfDfmfModelWithItsOwnOffsetMatchesCpuPath) {
+  // color=dfmf's default offset comes from the data (not Bonn's 1e-5): the kernels take it as an
+  // argument, so such a model's decode and eval_batch run on OpenCL and equal the CPU path.
+  REQUIRE_CL();
+  SynthOptions so;
+  so.width = 19, so.height = 11, so.scale = 30;
+  so.views.dirs.resize(9);
+  so.views.name = "custom";
+  auto btf = synthesize_btf(so);
+  ASSERT_TRUE(btf.ok());
+  auto r = resolve_spec("fmf:color=dfmf:rank=10:chroma_rank=4:precision=float");
+  Context ctx;
+  auto m = r->first->encode(btf.value(), r->second, ctx);
+  ASSERT_TRUE(m.ok()) << m.status().message();
+  ASSERT_EQ(m.value()->spec().find("offset=1e-05"), std::string::npos) << m.value()->spec();
+  std::vector<EvalQuery> q;
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (int i = 0; i < 3000; ++i) {
+    EvalQuery e;
+    e.x = int(rng() % 19), e.y = int(rng() % 11);
+    if (i % 5 == 0) e.light = int(rng() % 81), e.view = int(rng() % 9);
+    else e.wl = dir_from_theta_phi(u(rng) * 1.4, u(rng) * 6.28), e.wv = dir_from_theta_phi(u(rng) * 1.4, u(rng) * 6.28);
+    q.push_back(e);
+  }
+  std::vector<float> cpu(3 * q.size()), cl(cpu.size());
+  Btf dcpu, dcl;
+  ocl::set_device_choice(ocl::DeviceChoice::cpu);
+  ASSERT_TRUE(m.value()->eval_batch(q, cpu.data()).ok());
+  ASSERT_TRUE(m.value()->decode(DecodeRequest{}, dcpu).ok());
+  ocl::set_device_choice(ocl::DeviceChoice::cl);
+  ASSERT_TRUE(m.value()->eval_batch(q, cl.data()).ok());
+  ASSERT_TRUE(m.value()->decode(DecodeRequest{}, dcl).ok());
+  ocl::set_device_choice(ocl::DeviceChoice::automatic);
+  EXPECT_LE(rel_diff(cl, cpu), k_tol);
+  EXPECT_LE(rel_diff(std::vector<float>(dcl.data(), dcl.data() + dcl.size()), std::vector<float>(dcpu.data(), dcpu.data() + dcpu.size())), k_tol);
 }
 
 // ---- lpca --------------------------------------------------------------------------------------

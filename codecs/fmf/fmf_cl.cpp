@@ -11,8 +11,6 @@
 namespace btfc::fmf_cl {
 namespace {
 
-constexpr float k_eps = BTFC_DRR_EPS;
-
 // The kernel's summation order: 8 lanes of partial sums, then a pairwise reduction and the tail.
 // Written as multiply + add (not std::fma) so GCC vectorizes the lanes: a fair yardstick for
 // the kernels' speed; fused or not, the results differ only by float rounding.
@@ -27,8 +25,8 @@ float dot(const float* a, const float* b, int C) {
   return s;
 }
 
-void undecorrelate(float ylog, float u, float v, float* rgb) {
-  const float y = std::exp(ylog) - k_eps, s = y + k_eps;
+void undecorrelate(float ylog, float u, float v, float eps, float* rgb) {
+  const float y = std::exp(ylog) - eps, s = y + eps;
   u *= s, v *= s;
   rgb[0] = y + 1.13983f * v;
   rgb[1] = y - 0.39465f * u - 0.5806f * v;
@@ -46,7 +44,7 @@ void value(const PackedFactors& f, int texel, int l, int v, float* rgb) {
   const size_t r = size_t(l + f.nL * v) * C, t = size_t(texel) * C;
   const size_t ub = size_t(f.rows_per_block) * C, sb = size_t(f.texels) * C;
   undecorrelate(dot(f.U.data() + r, f.SxV.data() + t, C), dot(f.U.data() + ub + r, f.SxV.data() + sb + t, C),
-                dot(f.U.data() + 2 * ub + r, f.SxV.data() + 2 * sb + t, C), rgb);
+                dot(f.U.data() + 2 * ub + r, f.SxV.data() + 2 * sb + t, C), f.eps, rgb);
 }
 
 }  // namespace
@@ -227,7 +225,7 @@ Status run_eval(const DeviceFactors::Impl& m, const char* kernel_name, std::span
     const size_t n = std::min(k_slice, q.size() - first);
     BTFC_ASSIGN_OR_RETURN(ocl::Buffer qb, ocl::Buffer::wrap(*rt, n * sizeof(Q), const_cast<Q*>(q.data() + first), ocl::Access::read_only));
     BTFC_ASSIGN_OR_RETURN(ocl::Buffer ob, ocl::Buffer::wrap(*rt, n * 12, out + 3 * first, ocl::Access::write_only));
-    BTFC_RETURN_IF_ERROR(k.args(m.U, m.SxV, s.C, s.nL, s.rows_per_block, s.texels, s.mode, qb, int32_t(n), ob));
+    BTFC_RETURN_IF_ERROR(k.args(m.U, m.SxV, s.C, s.nL, s.rows_per_block, s.texels, s.mode, s.eps, qb, int32_t(n), ob));
     const size_t local = 64, global = (n + local - 1) / local * local;
     BTFC_RETURN_IF_ERROR(k.launch(1, &global, &local, kernel_name));
     BTFC_RETURN_IF_ERROR(ob.sync_to_host(n * 12));
@@ -310,7 +308,8 @@ Status DeviceFactors::decode(std::span<const int> texels, std::span<const int> l
         std::copy_n(SXall.data() + (size_t(b) * s.texels + size_t(texels[first + i])) * C, C, SX.data() + (size_t(b) * n + i) * C);
     BTFC_ASSIGN_OR_RETURN(ocl::Buffer sxb, ocl::Buffer::create(*rt, SX.size() * 4, SX.data(), ocl::Access::read_only));
     BTFC_ASSIGN_OR_RETURN(ocl::Buffer ob, ocl::Buffer::wrap(*rt, n * rows * 4, out + first * rows, ocl::Access::write_only));
-    BTFC_RETURN_IF_ERROR(k.args(utb, sxb, int32_t(C), int32_t(cols), int32_t(n), ob));
+    if (rgb) BTFC_RETURN_IF_ERROR(k.args(utb, sxb, int32_t(C), int32_t(cols), int32_t(n), ob));
+    else BTFC_RETURN_IF_ERROR(k.args(utb, sxb, int32_t(C), int32_t(cols), int32_t(n), s.eps, ob));
     // rgb: each work-item does 16 rows x 4 texels; dfmf: 16 directions x 1 texel.
     const size_t global[2] = {(cols + 15) / 16, rgb ? (n + 3) / 4 : n};
     BTFC_RETURN_IF_ERROR(k.launch(2, global, nullptr, "fmf_decode"));

@@ -19,6 +19,7 @@ namespace btfc::fmf_cl {
 struct PackedFactors {
   int mode = BTFC_FMF_RGB;
   int blocks = 1, C = 0, rows_per_block = 0, texels = 0, nL = 0, nV = 0;
+  float eps = BTFC_DRR_EPS;  // dfmf: the luminance offset (Bonn's colour model 11: BTFC_DRR_EPS)
   std::vector<float> U, SxV;
 };
 

@@ -14,6 +14,8 @@
 #include <Imath/half.h>
 #if BTFC_CPU_DISPATCH
 #include <immintrin.h>
+
+#include "core/avx512_sums.h"
 #endif
 
 namespace btfc::fmf {
@@ -212,7 +214,7 @@ __attribute__((target("avx512f,fma,f16c"))) void blend_half_avx512(const EvalFac
           w[3 * a + b] = _mm512_set1_ps(wt);
           r[3 * a + b] = wt != 0 ? f.Uh + (size_t(e.light[a]) + size_t(f.nL) * size_t(e.view[b])) * W : zero;
         }
-#define row(k, i) _mm512_cvtph_ps(_mm256_loadu_si256((const __m256i*)(r[k] + 16 * (i))))
+#define row(k, i) _mm512_maskz_cvtph_ps(0xffff, _mm256_loadu_si256((const __m256i*)(r[k] + 16 * (i))))
       for (int i = 0; i < V; ++i) {  // three chains of three, as blend_sorted
         __m512 x0 = _mm512_mul_ps(w[0], row(0, i)), x1 = _mm512_mul_ps(w[3], row(3, i)), x2 = _mm512_mul_ps(w[6], row(6, i));
         x0 = _mm512_fmadd_ps(w[1], row(1, i), x0), x1 = _mm512_fmadd_ps(w[4], row(4, i), x1), x2 = _mm512_fmadd_ps(w[7], row(7, i), x2);
@@ -226,7 +228,7 @@ __attribute__((target("avx512f,fma,f16c"))) void blend_half_avx512(const EvalFac
     for (int c = 0; c < NC; ++c) {
       __m512 d = _mm512_mul_ps(acc[c * PER], _mm512_loadu_ps(v));
       for (int i = 1; i < PER; ++i) d = _mm512_fmadd_ps(acc[c * PER + i], _mm512_loadu_ps(v + 16 * i), d);
-      out[j * NC + c] = _mm512_reduce_add_ps(d);
+      out[j * NC + c] = reduce_add_ps(d);
     }
   }
 }

@@ -18,6 +18,7 @@ fmf_cl::PackedFactors FmfModel::packed() const {
   f.texels = int(m_desc.num_texels());
   f.nL = int(m_desc.num_lights());
   f.nV = int(m_desc.num_views());
+  f.eps = m_cfg.dfmf ? m_cfg.offset : BTFC_DRR_EPS;
   // Blocks with fewer components (dfmf chroma) are zero-padded to the common C.
   f.U.assign(size_t(f.blocks) * f.rows_per_block * f.C, 0.0f);
   f.SxV.assign(size_t(f.blocks) * f.texels * f.C, 0.0f);
@@ -55,8 +56,7 @@ Status FmfModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
       return Model::eval_batch(q, out);  // the reference reports the bad query
   // On a CPU, the C++ paths (rgb: the sorted blocks of fmf_eval.h; dfmf: fmf_eval_dfmf.cpp). They
   // are also faster than the OpenCL kernels on PoCL's CPU device (docs/benchmarks.md), so OpenCL
-  // serves eval_batch only on a GPU or when asked for (--device cl), and never for a dfmf offset
-  // other than Bonn's (the kernels hard-code it).
+  // serves eval_batch only on a GPU or when asked for (--device cl).
   const ocl::DeviceChoice dc = ocl::device_choice();
   bool gpu = false;
   if (dc == ocl::DeviceChoice::automatic && ocl::use_opencl()) {
@@ -64,7 +64,7 @@ Status FmfModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
     gpu = rt.ok() && rt.value()->info().type == "gpu";
   }
   const bool cpu = dc != ocl::DeviceChoice::cl && !gpu;
-  if (m_cfg.dfmf && (cpu || !native_eps())) return eval_batch_dfmf_cpu(q, out);
+  if (m_cfg.dfmf && cpu) return eval_batch_dfmf_cpu(q, out);
   if (!m_cfg.dfmf && cpu && m_desc.num_lights() <= 65535 && m_desc.num_views() <= 65535)  // fmf_eval.cpp packs indices in 16 bits
     return eval_batch_cpu(q, out);
   if (m_desc.channels != 3 || !ocl::use_opencl()) return Model::eval_batch(q, out);
@@ -86,7 +86,7 @@ Status FmfModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
 Status FmfModel::decode(const DecodeRequest& req, Btf& out) const {
   BTFC_ASSIGN_OR_RETURN(ResolvedRequest rr, resolve_request(m_desc, req));
   BTFC_RETURN_IF_ERROR(prepare_output(rr.desc, out));
-  if (m_desc.channels == 3 && m_cfg.color_model < 0 && native_eps() && ocl::use_opencl()) {
+  if (m_desc.channels == 3 && m_cfg.color_model < 0 && ocl::use_opencl()) {
     Status s = decode_cl(rr, out);
     if (s.ok() || !ocl::fall_back_after(s)) return s;
   }

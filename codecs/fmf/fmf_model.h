@@ -153,9 +153,6 @@ class FmfModel final : public Model {
     dfmf_rgb(std::exp(ylog_u_v[0]), ylog_u_v[1], ylog_u_v[2], m_cfg.offset, rgb);
   }
 
-  // The OpenCL kernels (kernels/fmf.cl) hard-code Bonn's offset 1e-5: other dfmf offsets decode
-  // on the CPU path.
-  bool native_eps() const { return !m_cfg.dfmf || m_cfg.offset == k_drr_eps; }
 
   // precision=q: U and SxV become their zq tensors and the values those decode to
   // (codecs/fmf/fmf_quant.h); the eigen-textures are width x height images for textures=dct.
