@@ -140,7 +140,9 @@ TEST(StreamingDfmf, VectorizedTransformIsTheDefinition) {
       const double mag = (std::fabs(p[0]) + std::fabs(p[1]) + std::fabs(p[2])) / d;
       ASSERT_NEAR(y[r], std::log(d), 4e-7 * std::max(1.0, std::fabs(std::log(d))) + 3e-7 * mag) << "row " << r << " offset " << offset;
       const double want_u = (M(1, 0) * p[0] + M(1, 1) * p[1] + M(1, 2) * p[2]) / d;
-      if (std::fabs(want_u) < 1e37) EXPECT_NEAR(u[r], want_u, 1e-6 * mag) << "row " << r;  // else float overflow, as before
+      if (std::fabs(want_u) < 1e37) {
+        EXPECT_NEAR(u[r], want_u, 1e-6 * mag) << "row " << r;  // else float overflow, as before
+      }
     }
     EXPECT_EQ(clamped, want_clamped);
     EXPECT_GT(clamped, 0u);
@@ -242,7 +244,9 @@ TEST(StreamingDfmf, InCoreOneStreamHoldsAtTheExtremes) {
       ASSERT_TRUE(spec.ok());
       auto m = spec->first->encode(b, spec->second, ctx);
       ASSERT_TRUE(m.ok()) << name << ": " << m.status().message();
-      if (!exact) EXPECT_GE(stat(*m.value(), "krylov_blocks.y"), 1) << name << ": the one-stream path ran";
+      if (!exact) {
+        EXPECT_GE(stat(*m.value(), "krylov_blocks.y"), 1) << name << ": the one-stream path ran";
+      }
       Btf out;
       ASSERT_TRUE(m.value()->decode_all(out).ok());
       for (size_t i = 0; i < out.size(); ++i) ASSERT_TRUE(std::isfinite(out.data()[i])) << name << " value " << i;
@@ -252,9 +256,13 @@ TEST(StreamingDfmf, InCoreOneStreamHoldsAtTheExtremes) {
         sq += d * d, ref += double(b.data()[i]) * double(b.data()[i]);
       }
       err[exact] = std::sqrt(sq / std::max(ref, 1e-300));
-      if (std::string(name) == "zeros") EXPECT_LT(std::sqrt(sq / double(out.size())), 1e-6) << "zeros decode to ~0";
+      if (std::string(name) == "zeros") {
+        EXPECT_LT(std::sqrt(sq / double(out.size())), 1e-6) << "zeros decode to ~0";
+      }
     }
-    if (std::string(name) != "zeros") EXPECT_LE(err[0], err[1] * 1.01 + 1e-5) << name << ": randomized " << err[0] << ", exact " << err[1];
+    if (std::string(name) != "zeros") {
+      EXPECT_LE(err[0], err[1] * 1.01 + 1e-5) << name << ": randomized " << err[0] << ", exact " << err[1];
+    }
   }
 }
 
