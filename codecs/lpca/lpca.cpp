@@ -130,14 +130,32 @@ LpcaModel::LpcaModel(BtfDesc desc, std::string spec, Config cfg, std::vector<uin
   }
 }
 
+const float* LpcaModel::eval_table() const {
+  std::call_once(m_eval_once, [&] {
+    const size_t c1 = size_t(m_cfg.components) + 1, cols = size_t(m_table.cols());
+    m_eval_table.resize(size_t(m_table.size()));
+#pragma omp parallel for schedule(static)
+    for (Index k = 0; k < Index(m_clusters); ++k)
+      for (size_t i = 0; i < c1; ++i) {
+        const float* src = m_table.row(Index(size_t(k) * c1 + i)).data();
+        float* dst = m_eval_table.data() + size_t(k) * cols * c1 + i;
+        for (size_t col = 0; col < cols; ++col) dst[col * c1] = src[col];
+      }
+  });
+  return m_eval_table.data();
+}
+
 void LpcaModel::eval(int x, int y, int l, int v, float* out) const {
   const size_t t = size_t(x) + size_t(m_desc.width) * size_t(y);
   const int c = m_cfg.components;
-  const Index r0 = Index(m_cluster_of[t]) * (c + 1);
+  const size_t c1 = size_t(c) + 1;
+  // The channels of (l, v) are adjacent columns: one run of channels * (c + 1) floats.
+  const float* e = eval_table() + (size_t(m_cluster_of[t]) * size_t(m_table.cols()) + m_desc.row(size_t(l), size_t(v), 0)) * c1;
+  const float* w = m_weights.row(Index(t)).data();
   for (int ch = 0; ch < m_desc.channels; ++ch) {
-    const Index col = Index(m_desc.row(size_t(l), size_t(v), size_t(ch)));
-    float s = m_table(r0, col);
-    for (int i = 0; i < c; ++i) s += m_weights(Index(t), i) * m_table(r0 + 1 + i, col);
+    const float* p = e + size_t(ch) * c1;
+    float s = p[0];
+    for (int i = 0; i < c; ++i) s += w[i] * p[1 + i];
     out[ch] = s;
   }
 }

@@ -2,6 +2,7 @@
 // Users go through Model (codecs/codec.h) and the functions of lpca.h.
 #pragma once
 #include <Eigen/Core>
+#include <mutex>
 #include <vector>
 
 #include "codecs/codec.h"
@@ -71,6 +72,14 @@ class LpcaModel final : public Model {
   std::vector<Tensor> m_prt;
   std::vector<Tensor> m_coded;
   ModelStats m_stats;
+  // eval()'s copy of the table, made on first use: per cluster k and table column (row of the
+  // ABRDF), its c + 1 values (mean, eigen-BRDFs) adjacent, [(k * abrdf_size + col) * (c + 1) + i],
+  // so a (light, view) pair's channels are one run of 3 (c + 1) floats. In m_table they are
+  // abrdf_size floats apart (one cache line per value: 27 (c + 1) scattered lines per
+  // interpolated query); the decode's GEMM keeps m_table's layout.
+  const float* eval_table() const;
+  mutable std::once_flag m_eval_once;
+  mutable std::vector<float> m_eval_table;
 };
 
 }  // namespace btfc::lpca
