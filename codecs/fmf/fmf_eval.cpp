@@ -424,6 +424,7 @@ EvalFactors FmfModel::eval_factors() const {
 }
 
 Status FmfModel::eval_batch_cpu(std::span<const EvalQuery> q, float* out) const {
+  if (q.empty()) return {};  // no copy of the factors for nothing
   const EvalFactors f = eval_factors();
   const size_t block = block_for(q.size()), nb = (q.size() + block - 1) / block;
 #pragma omp parallel

@@ -149,6 +149,7 @@ BTFC_CPU_CLONES void blend_dfmf(const DfmfFactors& f, const btfc_fmf_query* q, s
 }  // namespace
 
 Status FmfModel::eval_batch_dfmf_cpu(std::span<const EvalQuery> q, float* out) const {
+  if (q.empty()) return {};  // no copy of the factors for nothing
   DfmfFactors f;
   for (int k = 0; k < 3; ++k) {
     f.C[k] = int(m_blocks[size_t(k)].U.cols());
