@@ -67,6 +67,9 @@ static_assert(sizeof(Sorted) == 44);
 inline bool same_pair(const Sorted& a, const Sorted& b) {
   return std::memcmp(&a.light, &b.light, sizeof(Sorted) - offsetof(Sorted, light)) == 0;
 }
+inline bool same_pair(const btfc_fmf_query& a, const btfc_fmf_query& b) {
+  return std::memcmp(&a.light, &b.light, sizeof(btfc_fmf_query) - offsetof(btfc_fmf_query, light)) == 0;
+}
 
 // The pair a query leans on most: its largest light and view weights.
 inline uint32_t dominant_pair(const btfc_fmf_query& e, int nL) {
@@ -78,15 +81,25 @@ inline uint32_t dominant_pair(const btfc_fmf_query& e, int nL) {
   return uint32_t(e.light[a]) + uint32_t(nL) * uint32_t(e.view[b]);
 }
 
-// The 9 (row, weight) terms of a query's blend: row (light a, view b) with weight wl[a] wv[b],
-// or `zero` for a term of weight 0.
-inline void pair_rows(const Sorted& e, const EvalFactors& f, size_t W, const float* zero, const float* r[9], float w[9]) {
+// The 9 (row, weight) terms of a query's blend: row (light a, view b) of `U` (W values per
+// pair; U's floats or halves) with weight wl[a] wv[b], or `zero` for a term of weight 0. Q is a
+// sorted query or a btfc_fmf_query.
+template <class Q, class T>
+__attribute__((always_inline)) inline void pair_rows(const Q& e, const T* U, int nL, size_t W, const T* zero, const T* r[9], float w[9]) {
   for (int a = 0; a < 3; ++a)
     for (int b = 0; b < 3; ++b) {
       const float wt = e.wl[a] * e.wv[b];
       w[3 * a + b] = wt;
-      r[3 * a + b] = wt != 0 ? f.U + (size_t(e.light[a]) + size_t(f.nL) * size_t(e.view[b])) * W : zero;
+      r[3 * a + b] = wt != 0 ? U + (size_t(e.light[a]) + size_t(nL) * size_t(e.view[b])) * W : zero;
     }
+}
+
+// The texel row (C floats) of the query `ahead` after j, prefetched.
+template <class Q>
+__attribute__((always_inline)) inline void prefetch_texel(const EvalFactors& f, const Q* s, size_t j, size_t n, size_t ahead, size_t C) {
+  if (j + ahead >= n) return;
+  const float* r = f.SxV + size_t(s[j + ahead].texel) * C;
+  for (size_t k = 0; k < C; k += 16) __builtin_prefetch(r + k);
 }
 
 // The sorted block's blend with everything in registers, for nc = NC channels of C = 16 PER
@@ -101,15 +114,12 @@ __attribute__((always_inline)) inline void blend_sorted(const EvalFactors& f, co
   v16 acc[V];
   const Sorted* prev = nullptr;
   for (size_t j = 0; j < n; ++j) {
-    if (j + ahead < n) {
-      const float* r = f.SxV + size_t(s[j + ahead].texel) * C;
-      for (size_t k = 0; k < C; k += 16) __builtin_prefetch(r + k);
-    }
+    prefetch_texel(f, s, j, n, ahead, C);
     const Sorted& e = s[j];
     if (!prev || !same_pair(e, *prev)) {
       const float* r[9];
       float w[9];
-      pair_rows(e, f, W, zero, r, w);
+      pair_rows(e, f.U, f.nL, W, zero, r, w);
       // Three chains of three (one per light vertex), then their sum: a chain of 9 dependent
       // FMAs would make the query's latency, not the FMA rate, the bound.
       for (int i = 0; i < V; ++i) {
@@ -146,15 +156,12 @@ __attribute__((target("avx2,fma"))) void blend_sorted_avx2(const EvalFactors& f,
   alignas(16) float tail[4];
   const Sorted* prev = nullptr;
   for (size_t j = 0; j < n; ++j) {
-    if (j + ahead < n) {
-      const float* r = f.SxV + size_t(s[j + ahead].texel) * C;
-      for (size_t k = 0; k < C; k += 16) __builtin_prefetch(r + k);
-    }
+    prefetch_texel(f, s, j, n, ahead, C);
     const Sorted& e = s[j];
     if (!prev || !same_pair(e, *prev)) {
       const float* r[9];
       float ws[9];
-      pair_rows(e, f, W, zero, r, ws);
+      pair_rows(e, f.U, f.nL, W, zero, r, ws);
       __m256 w[9];
       for (int i = 0; i < 9; ++i) w[i] = _mm256_set1_ps(ws[i]);
       for (int i = 0; i < V; ++i) {  // three chains of three, as the v16 kernel
@@ -200,20 +207,14 @@ __attribute__((target("avx512f,fma,f16c"))) void blend_half_avx512(const EvalFac
   __m512 acc[V];
   const btfc_fmf_query* prev = nullptr;
   for (size_t j = 0; j < n; ++j) {
-    if (j + ahead < n) {
-      const float* r = f.SxV + size_t(s[j + ahead].texel) * C;
-      for (size_t k = 0; k < C; k += 16) __builtin_prefetch(r + k);
-    }
+    prefetch_texel(f, s, j, n, ahead, C);
     const btfc_fmf_query& e = s[j];
-    if (!prev || std::memcmp(&e.light, &prev->light, sizeof(e) - offsetof(btfc_fmf_query, light)) != 0) {
+    if (!prev || !same_pair(e, *prev)) {
       const uint16_t* r[9];
+      float ws[9];
+      pair_rows(e, f.Uh, f.nL, W, zero, r, ws);
       __m512 w[9];
-      for (int a = 0; a < 3; ++a)
-        for (int b = 0; b < 3; ++b) {
-          const float wt = e.wl[a] * e.wv[b];
-          w[3 * a + b] = _mm512_set1_ps(wt);
-          r[3 * a + b] = wt != 0 ? f.Uh + (size_t(e.light[a]) + size_t(f.nL) * size_t(e.view[b])) * W : zero;
-        }
+      for (int i = 0; i < 9; ++i) w[i] = _mm512_set1_ps(ws[i]);
 #define row(k, i) _mm512_maskz_cvtph_ps(0xffff, _mm256_loadu_si256((const __m256i*)(r[k] + 16 * (i))))
       for (int i = 0; i < V; ++i) {  // three chains of three, as blend_sorted
         __m512 x0 = _mm512_mul_ps(w[0], row(0, i)), x1 = _mm512_mul_ps(w[3], row(3, i)), x2 = _mm512_mul_ps(w[6], row(6, i));

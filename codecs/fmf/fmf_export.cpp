@@ -35,7 +35,7 @@ Layout layout_of(const ExportBundle& b) {
   const nlohmann::json& e = b.evaluation;
   Layout L;
   L.mode = e.at("color_mode").get<int>();
-  if (L.mode == 11) L.eps = e.at("luminance_offset").get<float>();
+  if (L.mode == 11) L.eps = e.value("luminance_offset", k_drr_eps);  // absent: Bonn's (exports before it was written)
   L.nb = int(e.at("blocks").size());
   for (int i = 0; i < L.nb; ++i) {
     const nlohmann::json& bl = e.at("blocks")[size_t(i)];
