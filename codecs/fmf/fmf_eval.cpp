@@ -8,10 +8,11 @@
 #include <omp.h>
 #include <vector>
 
+#include <Imath/half.h>
+
 #include "codecs/fmf/fmf_model.h"
 #include "core/cpu_dispatch.h"
 #include "core/memory.h"
-#include <Imath/half.h>
 #if BTFC_CPU_DISPATCH
 #include <immintrin.h>
 
@@ -193,7 +194,6 @@ __attribute__((target("avx2,fma"))) void blend_sorted_avx2(const EvalFactors& f,
     for (int c = 0; c < NC; ++c) out[j * NC + c] = tail[c];
   }
 }
-
 
 // The AVX-512 blend reading U as half floats (EvalFactors::Uh, set when every value of U is a
 // half, as precision=half models store it: the converted rows are U's own floats, so the result
@@ -403,7 +403,7 @@ EvalFactors FmfModel::eval_factors() const {
   constexpr size_t huge = (size_t(2) << 20) / sizeof(float);
   const size_t off = (nu + huge - 1) / huge * huge, off_h = off + (ns + huge - 1) / huge * huge;
   std::call_once(m_eval_once, [&] {
-    // U as halves too when every value is one (precision=half models, blend_sorted_half).
+    // U as halves too when every value is one (precision=half models; blend_half_avx512).
     bool halves = true;
     for (size_t i = 0; i < nu && halves; ++i) halves = float(Imath::half(blk.U.data()[i])) == blk.U.data()[i];
     const size_t total = off_h + (halves ? (nu + 1) / 2 : 0);

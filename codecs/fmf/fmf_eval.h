@@ -14,7 +14,7 @@
 // When every value of U is a half float (precision=half, the default, rounds U so) the copy
 // holds U as halves too (1.27 MB for UBO2003 at rank 32, inside a 2 MB L2), and an AVX-512 CPU
 // blends the queries in their own order from it, unsorted: with U in L2 the sort and the
-// scatter back cost more than they save (docs/benchmarks.md, 32 -> 37 M evals/s).
+// scatter back cost what they save (docs/benchmarks.md: 35-36 -> 39-41 M evals/s).
 //
 // Contract: out[i * nc + c] equals the reference blend of eval_dir (per pair eval() sums, in
 // (a, b) order) to float rounding: the blend order differs (rows first, then the dot), and the

@@ -153,7 +153,6 @@ class FmfModel final : public Model {
     dfmf_rgb(std::exp(ylog_u_v[0]), ylog_u_v[1], ylog_u_v[2], m_cfg.offset, rgb);
   }
 
-
   // precision=q: U and SxV become their zq tensors and the values those decode to
   // (codecs/fmf/fmf_quant.h); the eigen-textures are width x height images for textures=dct.
   void quantize_block(Block& b) {
