@@ -156,7 +156,7 @@ void expected_rgb(const DfmfSpec& s, const float* v, float* rgb) {
   const double eps = 1e-5;
   const double yuv2rgb[3][3] = {{1, 0, 1.13983}, {1, -0.39465, -0.5806}, {1, 2.03211, 0}};
   const double ycocg[3][3] = {{1, 1, -1}, {1, 0, 1}, {1, -1, -1}};
-  double a[3] = {v[0], v[1], v[2]}, o[3];
+  double a[3] = {v[0], v[1], v[2]}, o[3] = {0, 0, 0};
   auto mul = [&](const double M[3][3]) {
     for (int i = 0; i < 3; ++i) o[i] = M[i][0] * a[0] + M[i][1] * a[1] + M[i][2] * a[2];
   };

@@ -474,7 +474,9 @@ TEST(Lpca, SaveLoadIsExactAndCorruptionIsReported) {
       auto t1 = rd->read(ti.name), t2 = rd2->read(ti.name);
       ASSERT_TRUE(t1.ok() && t2.ok()) << ti.name;
       EXPECT_TRUE(t1->dtype == t2->dtype && t1->bytes == t2->bytes) << prec << " " << ti.name;
-      if (std::string(prec).rfind("q", 0) == 0) EXPECT_EQ(t1->dtype, DType::zq) << ti.name;
+      if (std::string(prec).rfind("q", 0) == 0) {
+        EXPECT_EQ(t1->dtype, DType::zq) << ti.name;
+      }
     }
     // The GPU tensors of a quantized model are its dequantized floats.
     auto g = (*m2)->gpu_tensors();

@@ -346,7 +346,9 @@ TEST(Svd, TransposedProductKernelEqualsTheReference) {
       }
     }
   }
-  if (cpu_has_avx2_fma()) EXPECT_EQ(avx2_runs, 2 * 11) << "every l <= 96, both shapes";
+  if (cpu_has_avx2_fma()) {
+    EXPECT_EQ(avx2_runs, 2 * 11) << "every l <= 96, both shapes";
+  }
 }
 
 TEST(Svd, ThinProductKernelEqualsTheReference) {

@@ -78,7 +78,7 @@ Status read_dfmf_body(ByteSource& src, BonnInfo& info, FmfBody& body, std::vecto
     if (C > cmax)
       return src.corrupt(f + " num_components " + std::to_string(C) + " exceeds num_components_max " + std::to_string(cmax));
     BTFC_RETURN_IF_ERROR(read_factors(src, f, ss, C, nr, nc, d.num_images(), "num_lights x num_views", d.num_texels(),
-                                      c < 3 ? names[c] : "c" + std::to_string(c), blocks));
+                                      c < 3 ? std::string(names[c]) : std::string("c") + std::to_string(c), blocks));
     info.scalar_sizes.push_back(ss);
     info.components.push_back(int(C));
     body.half = body.half && ss == 2;

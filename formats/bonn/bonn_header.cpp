@@ -31,8 +31,9 @@ std::vector<std::pair<std::string, std::string>> BonnInfo::notes() const {
   if (color_model >= 0) n.emplace_back("bonn.color_model", std::to_string(color_model));
   std::string sizes, comps;
   for (size_t i = 0; i < scalar_sizes.size(); ++i) {
-    sizes += (i ? "," : "") + std::string(scalar_sizes[i] == 2 ? "half" : scalar_sizes[i] == 4 ? "float" : "double");
-    comps += (i ? "," : "") + std::to_string(components[i]);
+    if (i) sizes += ',', comps += ',';
+    sizes += scalar_sizes[i] == 2 ? "half" : scalar_sizes[i] == 4 ? "float" : "double";
+    comps += std::to_string(components[i]);
   }
   if (kind != BonnKind::bdi) {
     n.emplace_back("bonn.precision", sizes);
