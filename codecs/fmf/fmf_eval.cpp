@@ -68,7 +68,7 @@ static_assert(sizeof(Sorted) == 44);
 inline bool same_pair(const Sorted& a, const Sorted& b) {
   return std::memcmp(&a.light, &b.light, sizeof(Sorted) - offsetof(Sorted, light)) == 0;
 }
-inline bool same_pair(const btfc_fmf_query& a, const btfc_fmf_query& b) {
+[[maybe_unused]] inline bool same_pair(const btfc_fmf_query& a, const btfc_fmf_query& b) {  // blend_half_avx512's
   return std::memcmp(&a.light, &b.light, sizeof(btfc_fmf_query) - offsetof(btfc_fmf_query, light)) == 0;
 }
 
