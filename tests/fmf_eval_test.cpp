@@ -112,7 +112,7 @@ std::vector<EvalQuery> expect_measured_equals_eval(const Model& m, float tol) {
 TEST(FmfEval, EveryKernelShapeMatchesTheReference) {
   // ranks 16, 32, 48 take the register kernels (C a multiple of 16), 5 and 20 the generic loop.
   // precision=half (the default) stores U as halves, which an AVX-512 CPU blends unsorted from a
-  // half copy (blend_half); precision=float takes the sorted float kernels.
+  // half copy (blend_half_avx512); precision=float takes the sorted float kernels.
   const DirectionSet L = first(DirectionSet::ubo2003(), 31), V = first(DirectionSet::ubo2003(), 13);
   for (const char* precision : {"half", "float"})
     for (int channels : {3, 1})
