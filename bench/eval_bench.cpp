@@ -88,7 +88,10 @@ int main(int argc, char** argv) {
       c.U.resize(Eigen::Index(desc.num_lights() * desc.num_views()), C);
       c.SxV.resize(texels, C);
       const float g = 1.0f / std::sqrt(float(C));
-      for (Eigen::Index i = 0; i < c.U.size(); ++i) c.U.data()[i] = u(rng) * g;
+      for (Eigen::Index i = 0; i < c.U.size(); ++i) {  // as a default (precision=half) model stores U, unless --precision float
+        c.U.data()[i] = u(rng) * g;
+        if (precision == "half") c.U.data()[i] = float(Imath::half(c.U.data()[i]));
+      }
       for (Eigen::Index i = 0; i < c.SxV.size(); ++i) c.SxV.data()[i] = u(rng);
       c.S = Eigen::VectorXf::Ones(C), c.scale = Eigen::VectorXf::Ones(C);
       blocks.push_back(std::move(c));

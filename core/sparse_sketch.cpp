@@ -264,7 +264,8 @@ BTFC_CPU_CLONES void add_piece(float* acc, const float* v, size_t count, bool ne
 }
 }  // namespace
 
-void sparse_sign_columns(const float* B, size_t ldb, size_t m, size_t n, const SparseSign& S, float* W, double* energy, size_t first) {
+void sparse_sign_columns(const float* B, size_t ldb, size_t m, size_t n, const SparseSign& S, float* W, double* energy, size_t first,
+                         bool accumulate) {
   // Each texel's bucket per layer, from the row groups' picks (only the blocks of row groups
   // that hold texels [first, first + n)). An entry: the bucket (texel order) or the texel from
   // first (bucket order), bit 30 set in its first layer, bit 31 when it enters negated.
@@ -295,7 +296,8 @@ void sparse_sign_columns(const float* B, size_t ldb, size_t m, size_t n, const S
 #pragma omp parallel for schedule(static, 1)
     for (int64_t chunk = 0; chunk < chunks; ++chunk) {
       const size_t i0 = size_t(chunk) * k_column_rows, rows = std::min(k_column_rows, m - i0);
-      for (size_t b = 0; b < S.s; ++b) std::fill_n(W + b * m + i0, rows, 0.0f);
+      if (!accumulate)
+        for (size_t b = 0; b < S.s; ++b) std::fill_n(W + b * m + i0, rows, 0.0f);
       double e = 0;
       for (size_t j = 0; j < n; ++j) {
         const float* piece = B + j * ldb + i0;
@@ -337,7 +339,7 @@ void sparse_sign_columns(const float* B, size_t ldb, size_t m, size_t n, const S
     double e = 0;
     for (size_t b = b0; b < b0 + k_column_buckets; ++b) {
       float* acc = W + b * m + i0;
-      std::fill_n(acc, rows, 0.0f);
+      if (!accumulate) std::fill_n(acc, rows, 0.0f);
       for (uint32_t at = start[b]; at < start[b + 1]; ++at) {
         const uint32_t c = list[at];
         const float* piece = B + size_t(c & k_index) * ldb + i0;

@@ -65,8 +65,10 @@ bool sparse_sign_product_avx2(const float* B, size_t n, const SparseSign& S, flo
 // more). W has the same bits in either order. Each
 // bucket sums its texels in texel order (layer by layer within a texel), so the result does not
 // depend on the thread count. With `energy`, also *energy = ||B||_F^2 in double. The first block
-// of the in-core block Krylov SVD (core/svd.cpp).
+// of the in-core block Krylov SVD (core/svd.cpp). With `accumulate`, W += B S (W not zeroed
+// first): calls on consecutive chunks of texels, in order, leave W with the bits of one call on
+// them all (each bucket's running sum goes on in texel order); the streamed SVD's first pass.
 void sparse_sign_columns(const float* B, size_t ldb, size_t m, size_t n, const SparseSign& S, float* W, double* energy = nullptr,
-                         size_t first = 0);
+                         size_t first = 0, bool accumulate = false);
 
 }  // namespace btfc

@@ -312,6 +312,26 @@ Sketch make_column_sketch(size_t n, Index l, const SvdOptions& opt) {
   return r;
 }
 
+namespace {
+// Y = W G (W h x s column-major, Y h x l) on the threads in pieces of k_piece rows (one BLAS
+// thread each, as the passes' products; the pieces do not depend on the thread count, nor do the
+// bits): on one thread it left the other idle, ~1 ms per block of 8192 rows, three blocks per
+// chunk of the streamed SVD (its first pass 0.44-0.45 -> 0.42-0.44 s at UBO2003 size, 20 chunks,
+// rank 32, old and new binaries alternating; it now adds its chunks' sums first and multiplies
+// once: column_sketch_sums).
+void sketch_times_gaussian(const float* w, size_t h, const Sketch& sketch, Eigen::Ref<MatrixXf> Y) {
+  constexpr size_t k_piece = 512;
+  const Eigen::Map<const MatrixXf> W(w, Index(h), Index(sketch.S.s));
+  const int pieces = int((h + k_piece - 1) / k_piece);
+  const SingleThreadedBlas one_blas_thread(pieces > 1);
+#pragma omp parallel for schedule(dynamic, 1) if (pieces > 1)
+  for (int k = 0; k < pieces; ++k) {
+    const Index r0 = Index(k) * Index(k_piece), r1 = std::min(Index(h), r0 + Index(k_piece));
+    Y.middleRows(r0, r1 - r0).noalias() = W.middleRows(r0, r1 - r0) * sketch.G;
+  }
+}
+}  // namespace
+
 // Sparse: W = B S in one pass at memory speed (and ||B||_F^2), then W G; dense: B G.
 void column_sketch_product(const float* B, size_t m, size_t n, const Sketch& sketch, Eigen::Ref<MatrixXf> Y, double* energy,
                            size_t first, std::vector<float>* scratch) {
@@ -331,21 +351,21 @@ void column_sketch_product(const float* B, size_t m, size_t n, const Sketch& ske
     double e = 0;
     sparse_sign_columns(B + i0, m, h, n, sketch.S, w.data(), energy ? &e : nullptr, first);
     if (energy) *energy += e;  // in block order: independent of the thread count
-    // W G on the threads in pieces of k_piece rows (one BLAS thread each, as the passes'
-    // products; the pieces do not depend on the thread count, nor do the bits): on one thread it
-    // left the other idle, ~1 ms per block of 8192 rows, three blocks per chunk of the streamed
-    // SVD (its first pass 0.44-0.45 -> 0.42-0.44 s at UBO2003 size, 20 chunks, rank 32, old and new
-    // binaries alternating).
-    constexpr size_t k_piece = 512;
-    const Eigen::Map<const MatrixXf> W(w.data(), Index(h), Index(s));
-    const int pieces = int((h + k_piece - 1) / k_piece);
-    const SingleThreadedBlas one_blas_thread(pieces > 1);
-#pragma omp parallel for schedule(dynamic, 1) if (pieces > 1)
-    for (int k = 0; k < pieces; ++k) {
-      const Index r0 = Index(k) * Index(k_piece), r1 = std::min(Index(h), r0 + Index(k_piece));
-      Y.middleRows(Index(i0) + r0, r1 - r0).noalias() = W.middleRows(r0, r1 - r0) * sketch.G;
-    }
+    sketch_times_gaussian(w.data(), h, sketch, Y.middleRows(Index(i0), Index(h)));
   }
+}
+
+void column_sketch_sums(const float* B, size_t m, size_t n, const Sketch& sketch, float* W, double* energy, size_t first) {
+  double e = 0;
+  sparse_sign_columns(B, m, m, n, sketch.S, W, energy ? &e : nullptr, first, true);
+  if (energy) *energy += e;
+}
+
+void column_sketch_finish(const float* W, size_t m, const Sketch& sketch, Eigen::Ref<MatrixXf> Y) { sketch_times_gaussian(W, m, sketch, Y); }
+
+size_t column_sketch_sums_bytes(size_t m, size_t n, Index l) {
+  const size_t s = sketch_buckets(l);
+  return sketch_sparse(n, s) ? m * s * sizeof(float) : 0;
 }
 
 MatrixXd gram_columns(const Eigen::Ref<const MatrixXf>& Wt, Index from) {

@@ -57,6 +57,11 @@ struct SvdOptions {
   // pass at memory speed instead of a GEMM. false: a dense Gaussian test matrix. (The streamed
   // SVD, ooc_svd.h, sketches B's rows by the same rule.)
   bool sparse_sketch = true;
+  // The streamed SVD (codecs/fmf/ooc_svd.h) with a sparse first block: its chunks' B S summed in
+  // one m x s buffer and multiplied by G once (column_sketch_sums), or (false) each chunk's
+  // B S G on its own, without the buffer (the out-of-core plan's choice under a tight memory
+  // limit). Unused in core.
+  bool sketch_sums = true;
   Progress* progress = nullptr;
 };
 
@@ -120,6 +125,15 @@ void column_sketch_product(const float* B, size_t m, size_t n, const Sketch& ske
 // The scratch column_sketch_product takes for B m x n at l columns: at most 16 MiB and at most the
 // n l floats of a dense Pi (0 when dense: Pi itself is then n x l).
 size_t column_sketch_bytes(size_t m, size_t n, Eigen::Index l);
+// The same first pass in two steps, for a stream of chunks (sparse sketches only): each chunk's
+// B S added into W (m x s, column-major, zeroed by the caller; texels [first, first + n) of the
+// sketch's), *energy += its ||B||_F^2; then once Y = W G. One W G for the whole stream instead of
+// one per chunk (2 m s l flops each: a fifth of the streamed pass at UBO2003 size), for
+// column_sketch_sums_bytes(m, n, l) bytes of W (0: the sketch is dense, use
+// column_sketch_product).
+void column_sketch_sums(const float* B, size_t m, size_t n, const Sketch& sketch, float* W, double* energy, size_t first);
+void column_sketch_finish(const float* W, size_t m, const Sketch& sketch, Eigen::Ref<Eigen::MatrixXf> Y);
+size_t column_sketch_sums_bytes(size_t m, size_t n, Eigen::Index l);
 
 // Block Krylov's error-driven stop: after at least two blocks, stop once a block improved the
 // rank-C error by at most this fraction of itself (the remaining gap to the optimum is then a

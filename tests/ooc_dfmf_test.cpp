@@ -399,6 +399,25 @@ TEST(StreamingExact, StreamedDfmfExactMatchesInCore) {
   EXPECT_LT(model_difference(*in_core.value(), *st->model), 1e-4);
 }
 
+// The randomized plan sums the sparse sketch over the chunks (an m x s float buffer, SvdOptions::
+// sketch_sums) when memory allows, and not when the buffer would take half the chunks' lines.
+TEST(StreamingFmf, PlanSumsTheSketchWhereMemoryAllows) {
+  BtfDesc d;
+  d.width = 56, d.height = 56, d.channels = 3, d.lights = DirectionSet::ubo2003(), d.views = DirectionSet::ubo2003();
+  auto spec = resolve_spec("fmf:rank=32:svd=randomized");
+  ASSERT_TRUE(spec.ok());
+  auto roomy = plan_streamed_fmf(spec->second, d, size_t(1) << 30);
+  ASSERT_TRUE(roomy.ok()) << roomy.status().message();
+  EXPECT_TRUE(roomy->sketch_sums);
+  const uint64_t sums = column_sketch_sums_bytes(d.abrdf_size(), d.num_texels(), Eigen::Index(roomy->l));
+  EXPECT_EQ(sums, d.abrdf_size() * 256 * 4);  // l = 48: s = 256
+  // 40 MiB: the buffer (19.2 MiB) would not fit beside the rest; the plan streams without it.
+  auto tight = plan_streamed_fmf(spec->second, d, size_t(40) << 20);
+  ASSERT_TRUE(tight.ok()) << tight.status().message();
+  EXPECT_FALSE(tight->sketch_sums);
+  EXPECT_GT(roomy->fixed_bytes, sums);  // counted in the plan's memory
+}
+
 TEST(StreamingExact, GramThatDoesNotFitIsRefusedNamingTheSizes) {
   const Btf b = synth(8, 8);  // 486 rows
   auto exact = resolve_spec("fmf:rank=8:svd=exact"), automatic = resolve_spec("fmf:rank=8");

@@ -255,6 +255,35 @@ TEST(StreamingSvd, ThreeProcessesGiveTheOneProcessResult) {
   EXPECT_GT(A.norm(), 0);
 }
 
+// A first pass with the sparse sketch (n >= 4 s texels): the chunks' B S summed into one buffer
+// and multiplied by G once (SvdOptions::sketch_sums, the default), or each chunk's B S G on its
+// own (the plan's choice under a tight limit), over one process or three: the same basis to
+// float rounding (the buffer holds the bits of the whole matrix's B S: svd_test.cpp).
+TEST(StreamingSvd, SketchSumsOverTheChunksGiveTheSameResult) {
+  const Btf b = synth(40, 32);  // 1280 texels: n >= 4 s at s = 256
+  const size_t m = b.desc().abrdf_size(), n = b.desc().num_texels();
+  SvdOptions opt;
+  opt.max_rank = 10, opt.oversample = 6, opt.power_iters = 1;
+  ASSERT_GT(column_sketch_sums_bytes(m, n, 16), 0u);
+  MemorySource src(b, 100);  // 13 chunks, the last one short
+  Collective one;
+  auto sums = fmf::streaming_svd(src, owned_chunks(src, 0, 1), opt, one);
+  opt.sketch_sums = false;
+  auto apart = fmf::streaming_svd(src, owned_chunks(src, 0, 1), opt, one);
+  opt.sketch_sums = true;
+  std::vector<Result<SvdResult>> res(3, Result<SvdResult>(Status{}));
+  run_group(3, [&](Collective& me, int r) { res[size_t(r)] = fmf::streaming_svd(src, owned_chunks(src, r, 3), opt, me); });
+  ASSERT_TRUE(sums.ok() && apart.ok()) << sums.status().message() << apart.status().message();
+  for (int r = 0; r < 3; ++r) ASSERT_TRUE(res[size_t(r)].ok()) << res[size_t(r)].status().message();
+  const Eigen::MatrixXd A = sums->U.cast<double>() * sums->SxV.cast<double>().transpose();
+  for (const SvdResult* other : {&apart.value(), &res[0].value()}) {
+    const Eigen::MatrixXd B = other->U.cast<double>() * other->SxV.cast<double>().transpose();
+    EXPECT_LT((A - B).norm() / A.norm(), 1e-4);
+    EXPECT_LT((sums->S - other->S).cwiseAbs().maxCoeff(), 1e-5 * sums->S(0));
+  }
+  EXPECT_GT(actual_error(b, sums.value()), 1e-3);  // rank 10 is not exact here: the comparison means something
+}
+
 TEST(StreamingSvd, AFailingProcessStopsEveryProcessWithItsMessage) {
   const Btf b = synth(16, 15);
   MemorySource src(b, 32);

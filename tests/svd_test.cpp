@@ -248,6 +248,23 @@ TEST(Svd, ColumnSketchProductIsThreadCountFreeAndSumsOverChunks) {
   column_sketch_product(b.data(), m, split, sk, a, nullptr, 0);
   column_sketch_product(b.data() + split * m, m, n - split, sk, c, nullptr, split);
   EXPECT_LT(((a + c) - y).norm(), 1e-5 * y.norm());
+  // The streamed first pass: chunks' sums added into one W in order (the bits of the whole's W:
+  // each bucket's running sum goes on in texel order), then one W G (pieces of other heights
+  // than the row blocks above: equal to round-off).
+  ASSERT_EQ(column_sketch_sums_bytes(m, n, l), m * sk.S.s * sizeof(float));
+  EXPECT_EQ(column_sketch_sums_bytes(m, 4 * sk.S.s - 1, l), 0u);  // too few texels: the dense sketch
+  std::vector<float> ws(m * sk.S.s, 0.0f);
+  double es = 0;
+  for (size_t at : {size_t(0), size_t(700), split, size_t(2999)}) {
+    const size_t end = at == 0 ? 700 : at == 700 ? split : at == split ? 2999 : n;
+    column_sketch_sums(b.data() + at * m, m, end - at, sk, ws.data(), &es, at);
+  }
+  ASSERT_EQ(0, std::memcmp(ws.data(), wf.data(), wf.size() * sizeof(float)));
+  EXPECT_NEAR(es, energy, 1e-9 * energy);
+  Eigen::MatrixXf ys(Eigen::Index(m), l);
+  column_sketch_finish(ws.data(), m, sk, ys);
+  EXPECT_LT((ys - y).norm(), 1e-6 * y.norm());
+  EXPECT_LT((ys.cast<double>() - ref).norm(), 1e-5 * ref.norm());
 }
 
 TEST(Svd, BlockKrylovStopsEarlyOnAFastDecayAndHandlesExhaustedRanges) {

@@ -49,10 +49,12 @@ Result<StreamPlan> plan_streamed_fmf(const Params& p, const BtfDesc& desc, size_
   // the rows the basis P (double) and, in the passes, the sum buffer (double), Q and B Z (float);
   // on the texels W^T (w, float) and SxV or the first pass's test matrix (l: the dense Gaussian
   // rows, or the sparse sketch's scratch, svd.h column_sketch_bytes, which is at most as large);
-  // the Gram matrices; 16 MiB for small matrices and stacks.
+  // with plan.sketch_sums the sparse sketch's sums over the chunks (svd.h column_sketch_sums_bytes:
+  // m x s floats, s ~ 4 l); the Gram matrices; 16 MiB for small matrices and stacks.
+  const uint64_t sums_bytes = column_sketch_sums_bytes(m, n, Eigen::Index(plan.l));
   auto randomized_bytes = [&](uint64_t k) {
-    const uint64_t width = k * plan.l;
-    return channels * (m * (8 * width + 16 * plan.l) + n * (width + plan.l) * 4 + width * width * 8 * 3) + base;
+    const uint64_t width = k * plan.l, sums = plan.sketch_sums ? sums_bytes : 0;
+    return channels * (m * (8 * width + 16 * plan.l) + n * (width + plan.l) * 4 + sums + width * width * 8 * 3) + base;
   };
   // All q + 1 blocks when the chunks keep at least half the scan lines they have with one block
   // (the power iteration's footprint); else as many as do (a full basis then restarts from its
@@ -63,6 +65,14 @@ Result<StreamPlan> plan_streamed_fmf(const Params& p, const BtfDesc& desc, size_
     z.fixed_bytes = randomized_bytes(k), z.bytes_per_value = plan.bytes_per_value;
     return stream_lines_per_chunk(desc, z, max_bytes);
   };
+  // The sketch's sums (one W G per stream instead of one per chunk: 0.72-0.75 -> 0.42-0.44 s for
+  // the first pass at rank 128, UBO2003 size, docs/benchmarks.md) when the chunks keep at least
+  // half the scan lines they have without them.
+  if (sums_bytes > 0) {
+    const uint32_t without = lines(1);
+    plan.sketch_sums = true;
+    if (lines(1) < std::max<uint32_t>(1, without / 2)) plan.sketch_sums = false;
+  }
   const uint32_t floor_lines = std::max<uint32_t>(1, lines(1) / 2);
   plan.kept_blocks = 1;
   for (uint64_t k = max_blocks; k > 1; --k)
@@ -124,6 +134,7 @@ Result<StreamedEncode> encode_fmf_streamed(const ChunkSource& src, const BtfDesc
   opt.oversample = int(p.get_int("oversample"));
   opt.power_iters = int(p.get_int("power_iters"));
   opt.seed = ctx.seed;
+  opt.sketch_sums = plan.sketch_sums;
   opt.progress = coll.rank() == 0 ? ctx.progress : nullptr;
   StreamedEncode out;
   out.chunks = owned_chunks(src, coll.rank(), coll.size());

@@ -55,6 +55,11 @@ class Krylov {
     auto acc = Eigen::Map<MatrixXd>(sums, Index(m_m), m_l);
     switch (m_phase) {
       case Phase::sketch: {  // Y = B Pi: the chunk's part, through the sparse sign sketch ~ a read
+        if (m_sketch.sparse() && m_opt.sketch_sums) {  // W += B S here, Y = W G once, in pack()
+          if (m_w_sums.empty()) m_w_sums.assign(m_m * m_sketch.S.s, 0.0f);
+          column_sketch_sums(B, m_m, k, m_sketch, m_w_sums.data(), &m_energy, first + o);
+          break;
+        }
         double e = 0;
         m_y.resize(Index(m_m), m_l);
         column_sketch_product(B, m_m, k, m_sketch, m_y, &e, first + o, &m_scratch);
@@ -82,7 +87,13 @@ class Krylov {
     if (m_phase != Phase::project) return;
     m_G += gram_columns(m_wt[c].leftCols(m_w), 0);
   }
-  void pack(double* sums) const {
+  void pack(double* sums) {
+    if (m_phase == Phase::sketch && !m_w_sums.empty()) {  // this process's chunks: Y = (sum of B_c S_c) G
+      m_y.resize(Index(m_m), m_l);
+      column_sketch_finish(m_w_sums.data(), m_m, m_sketch, m_y);
+      add_into(Eigen::Map<MatrixXd>(sums, Index(m_m), m_l), m_y);
+      std::vector<float>().swap(m_w_sums);
+    }
     if (m_phase == Phase::sketch) sums[m_m * size_t(m_l)] = m_energy;
     if (m_phase == Phase::project) std::copy(m_G.data(), m_G.data() + m_G.size(), sums);
   }
@@ -182,7 +193,8 @@ class Krylov {
   int m_max_blocks = 1, m_kept = 1, m_blocks = 0, m_in_p = 0;
   Phase m_phase = Phase::sketch;
   Sketch m_sketch;  // on the texels
-  std::vector<float> m_scratch;  // the sketch's row blocks
+  std::vector<float> m_scratch;  // the sketch's row blocks (dense sketch: column_sketch_product)
+  std::vector<float> m_w_sums;   // sparse sketch: B S summed over the owned chunks (m x s)
   double m_energy = 0, m_last_err = -1;
   MatrixXd m_P, m_K, m_G;  // the basis (m x kept l), its Gram matrix P^T B B^T P, W W^T
   MatrixXf m_q, m_y;

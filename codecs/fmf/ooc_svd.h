@@ -7,7 +7,9 @@
 // once and does at most two products per chunk:
 //   pass 0        Y = B Pi, ||B||_F^2   (Pi on the texels, n x l, l = C + p: the in-core path's
 //                 first test matrix, svd.h make_column_sketch, a sparse sign sketch S times a
-//                 Gaussian, so the pass costs ~ a read: each chunk adds B_c S_c G); Q_1 = orth(Y)
+//                 Gaussian, so the pass costs ~ a read: the chunks' B_c S_c are summed in one
+//                 m x s buffer, multiplied by G once at the end, SvdOptions::sketch_sums; without
+//                 the buffer each chunk adds its B_c S_c G); Q_1 = orth(Y)
 //   pass b        Y = B Z with Z = B^T Q_b (per chunk, while it is in memory); Z is kept: it is
 //                 block b of W^T = B^T P. Q_{b+1} = orth(Y) against the kept blocks (svd.h,
 //                 orthonormalize_against), P = [Q_1 .. Q_{b+1}] (m x (b + 1) l, double)
@@ -41,7 +43,8 @@
 //
 // Memory: one raw chunk buffer and two float chunks (a helper thread reads and decodes the next
 // chunk while the current one is multiplied), or two mapped chunks for a mappable source, plus
-// O((m + n_local) kept l) for P and W^T (randomized) or streaming_exact_bytes(m) (exact). The
+// O((m + n_local) kept l) for P and W^T and the first pass's m x s sums (randomized) or
+// streaming_exact_bytes(m) (exact). The
 // caller sizes chunks so this stays under its limit (ooc_fmf.h).
 #pragma once
 #include <cstdint>
