@@ -1,5 +1,5 @@
 // Sums of float vectors (in double, or float lanes), for the hand-written AVX-512 kernels
-// (core/thin_product.cpp, core/sparse_sketch.cpp, codecs/fmf/fmf_eval.cpp): include only on
+// (core/thin_product.cpp, core/sparse_sketch.cpp): include only on
 // x86-64 with GCC, call only from code compiled with target("avx512f").
 //
 // Written with the full-mask maskz intrinsics (the low half too: codecs/fmf/fmf_color.cpp does

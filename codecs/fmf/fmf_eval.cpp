@@ -15,8 +15,6 @@
 #include "core/memory.h"
 #if BTFC_CPU_DISPATCH
 #include <immintrin.h>
-
-#include "core/avx512_sums.h"
 #endif
 
 namespace btfc::fmf {
@@ -103,42 +101,61 @@ __attribute__((always_inline)) inline void prefetch_texel(const EvalFactors& f, 
   for (size_t k = 0; k < C; k += 16) __builtin_prefetch(r + k);
 }
 
-// The sorted block's blend with everything in registers, for nc = NC channels of C = 16 PER
-// components (each channel's row starts on a vector). All 9 terms are summed, branch-free; a
-// term of weight 0 reads `zero` (so a zero weight contributes exactly 0, as the reference's
-// skipped term). A query with the previous one's pair reuses the blended rows.
-template <int NC, int PER>
-__attribute__((always_inline)) inline void blend_sorted(const EvalFactors& f, const Sorted* s, size_t n, float* out,
-                                                        const float* zero, size_t ahead) {
+// A row's 16 values as floats: U's own, or its halves converted (exact; vcvtph2ps in the
+// AVX-512 kernel that alone reads halves, blend_half_avx512). Always inlined, the vector return
+// crosses no ABI, so GCC's note on the baseline's vector ABI does not apply.
+#pragma GCC diagnostic ignored "-Wpsabi"
+__attribute__((always_inline)) inline v16 load_row(const float* p) { return *(const v16*)p; }
+#if BTFC_CPU_DISPATCH
+__attribute__((target("avx512f,f16c"))) inline v16 load_row(const uint16_t* p) {
+  return (v16)_mm512_maskz_cvtph_ps(0xffff, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p)));
+}
+#endif
+
+// A block's blend with everything in registers, for nc = NC channels of C = 16 PER components
+// (each channel's row starts on a vector), from U's rows as floats or halves (T). All 9 terms
+// are summed, branch-free; a term of weight 0 reads `zero` (so a zero weight contributes exactly
+// 0, as the reference's skipped term). A query with the previous one's pair reuses the blended
+// rows. out[j NC + c] in the block's order (a sorted block's: the caller scatters them back).
+template <int NC, int PER, class Q, class T>
+__attribute__((always_inline)) inline void blend_rows(const EvalFactors& f, const Q* s, size_t n, float* out, const T* U,
+                                                      const T* zero, size_t ahead) {
   constexpr int V = NC * PER;
   constexpr size_t C = 16 * PER, W = NC * C;
   v16 acc[V];
-  const Sorted* prev = nullptr;
+  const Q* prev = nullptr;
   for (size_t j = 0; j < n; ++j) {
     prefetch_texel(f, s, j, n, ahead, C);
-    const Sorted& e = s[j];
+    const Q& e = s[j];
     if (!prev || !same_pair(e, *prev)) {
-      const float* r[9];
+      const T* r[9];
       float w[9];
-      pair_rows(e, f.U, f.nL, W, zero, r, w);
+      pair_rows(e, U, f.nL, W, zero, r, w);
       // Three chains of three (one per light vertex), then their sum: a chain of 9 dependent
       // FMAs would make the query's latency, not the FMA rate, the bound.
       for (int i = 0; i < V; ++i) {
-        v16 x0 = w[0] * *(const v16*)(r[0] + 16 * i), x1 = w[3] * *(const v16*)(r[3] + 16 * i), x2 = w[6] * *(const v16*)(r[6] + 16 * i);
-        x0 += w[1] * *(const v16*)(r[1] + 16 * i), x1 += w[4] * *(const v16*)(r[4] + 16 * i), x2 += w[7] * *(const v16*)(r[7] + 16 * i);
-        x0 += w[2] * *(const v16*)(r[2] + 16 * i), x1 += w[5] * *(const v16*)(r[5] + 16 * i), x2 += w[8] * *(const v16*)(r[8] + 16 * i);
+        v16 x0 = w[0] * load_row(r[0] + 16 * i), x1 = w[3] * load_row(r[3] + 16 * i), x2 = w[6] * load_row(r[6] + 16 * i);
+        x0 += w[1] * load_row(r[1] + 16 * i), x1 += w[4] * load_row(r[4] + 16 * i), x2 += w[7] * load_row(r[7] + 16 * i);
+        x0 += w[2] * load_row(r[2] + 16 * i), x1 += w[5] * load_row(r[5] + 16 * i), x2 += w[8] * load_row(r[8] + 16 * i);
         acc[i] = x0 + x1 + x2;
       }
       prev = &e;
     }
     const float* v = f.SxV + size_t(e.texel) * C;
-    float* o = out + j * NC;  // in sorted order: the caller scatters the block's results
+    float* o = out + j * NC;
     for (int c = 0; c < NC; ++c) {
       v16 d = acc[c * PER] * *(const v16*)v;
       for (int i = 1; i < PER; ++i) d += acc[c * PER + i] * *(const v16*)(v + 16 * i);
       o[c] = hsum(d);
     }
   }
+}
+
+// The sorted block's blend from U's floats (inlined into eval_weighted_block's CPU clones).
+template <int NC, int PER>
+__attribute__((always_inline)) inline void blend_sorted(const EvalFactors& f, const Sorted* s, size_t n, float* out,
+                                                        const float* zero, size_t ahead) {
+  blend_rows<NC, PER>(f, s, n, out, f.U, zero, ahead);
 }
 
 #if BTFC_CPU_DISPATCH
@@ -198,40 +215,12 @@ __attribute__((target("avx2,fma"))) void blend_sorted_avx2(const EvalFactors& f,
 // The AVX-512 blend reading U as half floats (EvalFactors::Uh, set when every value of U is a
 // half, as precision=half models store it: the converted rows are U's own floats, so the result
 // is the float kernel's). Random queries read 27 rows of U each; as halves U takes 1.27 MB for
-// UBO2003 at rank 32 and stays in a 2 MB L2, where the float copy (2.5 MB) spills to L3.
+// UBO2003 at rank 32 and stays in a 2 MB L2, where the float copy (2.5 MB) spills to L3. The
+// queries in their own order (no sort: with U in L2 it cost what it saved).
 template <int NC, int PER>
 __attribute__((target("avx512f,fma,f16c"))) void blend_half_avx512(const EvalFactors& f, const btfc_fmf_query* s, size_t n, float* out,
-                                                          const uint16_t* zero, size_t ahead) {
-  constexpr int V = NC * PER;
-  constexpr size_t C = 16 * PER, W = NC * C;
-  __m512 acc[V];
-  const btfc_fmf_query* prev = nullptr;
-  for (size_t j = 0; j < n; ++j) {
-    prefetch_texel(f, s, j, n, ahead, C);
-    const btfc_fmf_query& e = s[j];
-    if (!prev || !same_pair(e, *prev)) {
-      const uint16_t* r[9];
-      float ws[9];
-      pair_rows(e, f.Uh, f.nL, W, zero, r, ws);
-      __m512 w[9];
-      for (int i = 0; i < 9; ++i) w[i] = _mm512_set1_ps(ws[i]);
-#define row(k, i) _mm512_maskz_cvtph_ps(0xffff, _mm256_loadu_si256((const __m256i*)(r[k] + 16 * (i))))
-      for (int i = 0; i < V; ++i) {  // three chains of three, as blend_sorted
-        __m512 x0 = _mm512_mul_ps(w[0], row(0, i)), x1 = _mm512_mul_ps(w[3], row(3, i)), x2 = _mm512_mul_ps(w[6], row(6, i));
-        x0 = _mm512_fmadd_ps(w[1], row(1, i), x0), x1 = _mm512_fmadd_ps(w[4], row(4, i), x1), x2 = _mm512_fmadd_ps(w[7], row(7, i), x2);
-        x0 = _mm512_fmadd_ps(w[2], row(2, i), x0), x1 = _mm512_fmadd_ps(w[5], row(5, i), x1), x2 = _mm512_fmadd_ps(w[8], row(8, i), x2);
-        acc[i] = _mm512_add_ps(_mm512_add_ps(x0, x1), x2);
-      }
-#undef row
-      prev = &e;
-    }
-    const float* v = f.SxV + size_t(e.texel) * C;
-    for (int c = 0; c < NC; ++c) {
-      __m512 d = _mm512_mul_ps(acc[c * PER], _mm512_loadu_ps(v));
-      for (int i = 1; i < PER; ++i) d = _mm512_fmadd_ps(acc[c * PER + i], _mm512_loadu_ps(v + 16 * i), d);
-      out[j * NC + c] = reduce_add_ps(d);
-    }
-  }
+                                                                   const uint16_t* zero, size_t ahead) {
+  blend_rows<NC, PER>(f, s, n, out, f.Uh, zero, ahead);
 }
 #endif
 
