@@ -39,7 +39,7 @@ const Btf& input() {
   static const Btf btf = [] {
     SynthOptions o;
     o.width = 4, o.height = 4, o.seed = 11;
-    return std::move(synthesize_btf(o).value());
+    return synthesize_btf(o).value();
   }();
   return btf;
 }

@@ -25,6 +25,9 @@ namespace {
 // AVX2 registers in the v3 clone and four SSE registers in the baseline (core/cpu_dispatch.h),
 // where a plain loop would be vectorized at 256 bits only (GCC's default preferred width).
 typedef float v16 __attribute__((vector_size(64), aligned(4), may_alias));
+// The helpers below take and return these vectors by value: always inlined, they cross no ABI,
+// so the compilers' note on the baseline's vector ABI (-Wpsabi) does not apply.
+#pragma GCC diagnostic ignored "-Wpsabi"
 typedef float v8 __attribute__((vector_size(32), aligned(4), may_alias));
 typedef float v4 __attribute__((vector_size(16), aligned(4), may_alias));
 
@@ -102,9 +105,7 @@ __attribute__((always_inline)) inline void prefetch_texel(const EvalFactors& f, 
 }
 
 // A row's 16 values as floats: U's own, or its halves converted (exact; vcvtph2ps in the
-// AVX-512 kernel that alone reads halves, blend_half_avx512). Always inlined, the vector return
-// crosses no ABI, so GCC's note on the baseline's vector ABI does not apply.
-#pragma GCC diagnostic ignored "-Wpsabi"
+// AVX-512 kernel that alone reads halves, blend_half_avx512).
 __attribute__((always_inline)) inline v16 load_row(const float* p) { return *(const v16*)p; }
 #if BTFC_CPU_DISPATCH
 __attribute__((target("avx512f,f16c"))) inline v16 load_row(const uint16_t* p) {

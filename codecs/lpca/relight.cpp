@@ -16,7 +16,6 @@ namespace btfc {
 namespace {
 
 using lpca::LpcaModel;
-constexpr double k_pi = 3.14159265358979323846;
 constexpr int k_prt_res = 16;
 
 Result<const LpcaModel*> as_lpca(const Model& m) {
