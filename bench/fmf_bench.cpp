@@ -9,7 +9,9 @@
 //
 //   bench_fmf [--width 256] [--height 256] [--rank 32] [--power-iters 4] [--oversample 16]
 //             [--reference] [--dump FILE]   (FILE: raw float32 matrix for bench/peer_sklearn.sh)
-//             [--codec SPEC]  (time another codec's encode on the same input instead, e.g. lpyr)
+//             [--codec SPEC [--keep-input]]  (time another codec's encode on the same input instead,
+//             e.g. lpyr; the encode may consume the input as `btfc compress` lets it (Context::
+//             consumable), unless --keep-input)
 //             [--load FILE [--rows 19683] [--texels N]]  (factorize a --dump file, or its first N
 //             texels, instead of synthesizing)
 //             [--scheme krylov|power] [--svd-only]  (randomized scheme; skip the codec run)
@@ -53,7 +55,7 @@ static double peak_rss_gb() {
 int main(int argc, char** argv) {
   reexec_for_openblas(argc, argv);
   int width = 256, height = 256, rank = 32, power = 4, over = 16;
-  bool reference = false, svd_only = false, dump_only = false;
+  bool reference = false, svd_only = false, dump_only = false, keep_input = false;
   size_t load_rows = 19683, load_texels = 0;
   RandomizedScheme scheme = RandomizedScheme::block_krylov;
   bool dense_start = false;
@@ -76,6 +78,7 @@ int main(int argc, char** argv) {
     else if (a == "--rows") load_rows = size_t(next());
     else if (a == "--texels") load_texels = size_t(next());
     else if (a == "--svd-only") svd_only = true;
+    else if (a == "--keep-input") keep_input = true;
     else if (a == "--dump-only") dump_only = true;
     else if (a == "--dense-start") dense_start = true;
     else if (a == "--seed") seed = uint64_t(next());
@@ -204,6 +207,7 @@ int main(int argc, char** argv) {
     auto spec = resolve_spec(codec_spec);
     if (!spec.ok()) return 1;
     Context ctx;
+    if (!keep_input) ctx.consumable = &btf.value();  // as btfc compress: the input is not used again
     t0 = now_s();
     auto model = spec->first->encode(btf.value(), spec->second, ctx);
     if (!model.ok()) return 3;

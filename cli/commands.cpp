@@ -320,6 +320,7 @@ int cmd_compress(const Global& g, const CompressArgs& given) {
     }
     model = std::move(c.model);
   } else {
+    ctx.consumable = &btf.value();  // read for this encode alone: below, only its shape is used
     model = codec->encode(btf.value(), params, ctx);
   }
   if (!model.ok()) return fail(g, model.status().with_context(a.in));

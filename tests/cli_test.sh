@@ -160,6 +160,20 @@ check export-dfmf-auto 0 "$BTFC" export "$W/dfa.btfc" --to "$W/exp-dfa" --no-pre
 expect_grep export-dfmf-auto-warn "model.bsvtf not written" "$W/err.txt"
 expect_grep export-dfmf-auto-shader "const float DFMF_OFFSET" "$W/exp-dfa/btf.frag"
 [ -s "$W/exp-dfa/eigen_texture.ktx2" ] && [ ! -e "$W/exp-dfa/model.bsvtf" ] && echo "ok   export-dfmf-auto-files" || { echo "FAIL export-dfmf-auto-files"; fails=$((fails + 1)); }
+# The randomized dfmf encode converts the BTF compress read in place, once (Context::consumable):
+# the input file is untouched and the model is as close to it as the exact encode's.
+sum_before=$(sha256sum "$W/s.btfc" | cut -d' ' -f1)
+check compress-dfmf-inplace 0 "$BTFC" compress "$W/s.btfc" -c fmf:color=dfmf:rank=6:chroma_rank=2:svd=randomized:power_iters=2 -o "$W/dfr.btfc"
+[ "$(sha256sum "$W/s.btfc" | cut -d' ' -f1)" = "$sum_before" ] && echo "ok   compress-dfmf-inplace-input" || { echo "FAIL compress-dfmf-inplace-input"; fails=$((fails + 1)); }
+check compare-dfmf-exact 0 "$BTFC" --json compare "$W/s.btfc" "$W/dfa.btfc"
+cp "$W/out.txt" "$W/cmp-exact.json"
+check compare-dfmf-inplace 0 "$BTFC" --json compare "$W/s.btfc" "$W/dfr.btfc"
+python3 - "$W/cmp-exact.json" "$W/out.txt" <<'PY' || fails=$((fails + 1))
+import json, sys
+e, r = (json.load(open(p))["rel_l2"] for p in sys.argv[1:3])
+assert e > 0 and abs(r - e) <= 0.02 * e, (e, r)  # half-float storage: either may be the lower
+print("ok   compare-dfmf-inplace-values", e, r)
+PY
 cat >"$W/scene.json" <<'JSON'
 {"materials": [{"name": "floor", "footprint": [2, 8], "view_cone": {"theta": 0, "phi": 0, "angle": 30}, "gpu_budget": "4M"}]}
 JSON

@@ -16,6 +16,7 @@
 #include "codecs/fmf/fmf_model.h"
 #include "codecs/fmf/ooc_dfmf.h"
 #include "codecs/fmf/ooc_fmf.h"
+#include "core/chunks.h"
 #include "core/svd.h"
 #include "tests/ooc_test_util.h"
 
@@ -264,6 +265,89 @@ TEST(StreamingDfmf, InCoreOneStreamHoldsAtTheExtremes) {
       EXPECT_LE(err[0], err[1] * 1.01 + 1e-5) << name << ": randomized " << err[0] << ", exact " << err[1];
     }
   }
+}
+
+// Context::consumable: the in-core color=dfmf encode then converts each part once, into the
+// input's own memory, and gives the model it gives without (bit for bit). The consumed input
+// has changed (the path ran); target_error, whose search compares decodes with the input, and a
+// context naming another BTF leave the input as it was.
+TEST(StreamingDfmf, ConsumedInputGivesTheSameModel) {
+  const Btf b = noisy(12, 10);  // 162 images x 120 texels
+  for (const char* text : {"fmf:color=dfmf:rank=6:chroma_rank=3:oversample=4:power_iters=2:precision=float:svd=randomized",
+                           "fmf:color=dfmf:rank=6:oversample=4:power_iters=2:svd=randomized:target_error=0.05"}) {
+    auto spec = resolve_spec(text);
+    ASSERT_TRUE(spec.ok()) << text;
+    Context keep;
+    auto want = spec->first->encode(b, spec->second, keep);
+    ASSERT_TRUE(want.ok()) << text << ": " << want.status().message();
+    for (int named = 0; named < 2; ++named) {
+      Btf in = b, other = b;
+      Context eat;
+      eat.consumable = named ? &in : &other;
+      auto got = spec->first->encode(in, spec->second, eat);
+      ASSERT_TRUE(got.ok()) << text << ": " << got.status().message();
+      const auto& wb = dynamic_cast<const fmf::FmfModel&>(*want.value()).blocks();
+      const auto& gb = dynamic_cast<const fmf::FmfModel&>(*got.value()).blocks();
+      ASSERT_EQ(wb.size(), 3u);
+      ASSERT_EQ(gb.size(), 3u);
+      for (size_t k = 0; k < 3; ++k) {
+        EXPECT_TRUE(wb[k].U == gb[k].U && wb[k].SxV == gb[k].SxV && wb[k].S == gb[k].S) << text << ": block " << k;
+      }
+      EXPECT_EQ(stat(*got.value(), "negative_luminance_clamped"), stat(*want.value(), "negative_luminance_clamped"));
+      EXPECT_GT(stat(*got.value(), "negative_luminance_clamped"), 0) << "the clamp count means something";
+      const bool consumed = std::memcmp(in.data(), b.data(), b.size() * sizeof(float)) != 0;
+      EXPECT_EQ(consumed, named == 1 && std::strstr(text, "target_error") == nullptr) << text << ", named " << named;
+      EXPECT_EQ(std::memcmp(other.data(), b.data(), b.size() * sizeof(float)), 0) << "only the named input is consumed";
+    }
+  }
+}
+
+// ChunkSplit::in_place over chunks and parts of several sizes: the results are those of
+// splitting in every pass, bit for bit, each part is split once (the later passes read it
+// back), and the source's memory holds each part's matrices after the stream.
+TEST(StreamingDfmf, InPlaceSplitKeepsEachPartWhereItWas) {
+  const Btf b = noisy(6, 5);  // 486 rows (162 x RGB) x 30 texels
+  const size_t in_rows = b.desc().abrdf_size(), m = in_rows / 3, n = b.desc().num_texels();
+  SvdOptions o;
+  o.max_rank = 3, o.oversample = 3, o.power_iters = 2, o.method = SvdMethod::randomized;
+  const std::vector<SvdOptions> opts{o, o, o};
+  // Matrix i: rows i, i + 3, ... of the source, times i + 1 (a deinterleave, as the colour split).
+  size_t splits = 0;
+  auto split_fn = [&](size_t, size_t, const float* B, size_t count, float* const* out) {
+    ++splits;
+    for (size_t t = 0; t < count; ++t)
+      for (size_t r = 0; r < m; ++r)
+        for (size_t i = 0; i < 3; ++i) out[i][t * m + r] = B[t * in_rows + 3 * r + i] * float(i + 1);
+  };
+  Btf kept = b;
+  fmf::ChunkSplit plain, in_place;
+  plain.channels = in_place.channels = 3, plain.rows = in_place.rows = m;
+  plain.split = in_place.split = split_fn;
+  plain.part_values = in_place.part_values = 3 * m;  // parts of 3 texels: 3 + 3 + 1 in a chunk of 7
+  const MatrixChunks src(b.data(), in_rows, n, 7), dst(kept.data(), in_rows, n, 7);
+  in_place.in_place = [&](size_t c, size_t off) { return kept.data() + (dst.chunk_first(c) + off) * in_rows; };
+  Collective one;
+  StreamStats st;
+  auto want = fmf::streaming_svds(src, owned_chunks(src, 0, 1), &plain, opts, one);
+  const size_t splits_plain = splits;
+  splits = 0;
+  auto got = fmf::streaming_svds(dst, owned_chunks(dst, 0, 1), &in_place, opts, one, &st);
+  ASSERT_TRUE(want.ok() && got.ok());
+  EXPECT_GE(st.passes, 3);
+  EXPECT_EQ(splits, size_t(13)) << "4 chunks of 3 parts and one of 2 texels (1 part), each split once";
+  EXPECT_EQ(splits_plain, splits * size_t(st.passes)) << "without: split in every pass";
+  for (size_t i = 0; i < 3; ++i) {
+    EXPECT_TRUE(want.value()[i].U == got.value()[i].U && want.value()[i].SxV == got.value()[i].SxV && want.value()[i].S == got.value()[i].S)
+        << "matrix " << i;
+  }
+  // Texel 8 is chunk 1's second texel, in its first part (texels 7-9): matrix i's column 1 there.
+  const float* part = kept.data() + 7 * in_rows;
+  for (size_t i = 0; i < 3; ++i)
+    for (size_t r = 0; r < m; ++r) ASSERT_EQ(part[i * m * 3 + 1 * m + r], b.abrdf(8)[3 * r + i] * float(i + 1)) << i << ", " << r;
+  // A split that does not fill the source's rows is refused.
+  fmf::ChunkSplit bad = in_place;
+  bad.rows = m - 1;
+  EXPECT_FALSE(fmf::streaming_svds(dst, owned_chunks(dst, 0, 1), &bad, opts, one).ok());
 }
 
 TEST(StreamingDfmf, ChannelChunksAreTheInCoreTransform) {

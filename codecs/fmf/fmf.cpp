@@ -190,11 +190,16 @@ class FmfCodec final : public Codec {
         // channel's products on it. No channel matrix exists whole: the in-core copy of one
         // took a third of the input (peak 1.40 x the input at UBO2003 size) and 4 s of page
         // faults, and each channel's passes read it again.
+        // When the caller lets the encode consume the input (ctx.consumable), each part is
+        // converted once, in the first pass, into the Btf's own memory: the later passes read the
+        // channels there (UBO2003 size, rank 64: see docs/benchmarks.md). Not for target_error,
+        // whose search compares decodes against the input.
         const MatrixChunks src(btf.data(), d.abrdf_size(), n, std::max<size_t>(1, (size_t(64) << 20) / d.abrdf_size()));
+        float* const scratch = ctx.consumable == &btf && !dfmf_target ? ctx.consumable->data() : nullptr;
         Collective one;
         double cl = 0;
         BTFC_ASSIGN_OR_RETURN(std::vector<SvdResult> rs,
-                              dfmf_streaming_svds(src, owned_chunks(src, 0, 1), offset, oc[0], oc[1], one, nullptr, 0, &cl));
+                              dfmf_streaming_svds(src, owned_chunks(src, 0, 1), offset, oc[0], oc[1], one, nullptr, 0, &cl, scratch));
         for (int k = 0; k < 3; ++k) blocks.push_back(block_from_svd(names[k], std::move(rs[k]), cfg.half, ranks[k], 0, stats));
         clamped = size_t(cl);
       } else {

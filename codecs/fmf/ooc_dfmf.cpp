@@ -93,7 +93,7 @@ uint64_t DfmfChannelSource::clamped() const {
 
 Result<std::vector<SvdResult>> dfmf_streaming_svds(const ChunkSource& base, const std::vector<size_t>& chunks, float offset,
                                                    const SvdOptions& opt_y, const SvdOptions& opt_c, Collective& coll,
-                                                   StreamStats* stats, int kept_blocks, double* clamped) {
+                                                   StreamStats* stats, int kept_blocks, double* clamped, float* in_place) {
   const size_t in_rows = base.rows(), rows = in_rows / 3;
   if (in_rows % 3 != 0 || rows == 0)
     return invalid_argument("color=dfmf needs 3 channels: the BTF matrix has " + std::to_string(in_rows) + " rows");
@@ -110,6 +110,7 @@ Result<std::vector<SvdResult>> dfmf_streaming_svds(const ChunkSource& base, cons
     }
     per_chunk[c] = (o == 0 ? 0 : per_chunk[c]) + n;
   };
+  if (in_place) split.in_place = [&](size_t c, size_t o) { return in_place + (base.chunk_first(c) + o) * in_rows; };
   auto rs = fmf::streaming_svds(base, chunks, &split, {opt_y, opt_c, opt_c}, coll, stats, kept_blocks);
   for (size_t c : chunks) *clamped += double(per_chunk[c]);
   return rs;

@@ -4,6 +4,9 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <xmmintrin.h>
 #include <vector>
 
 #include "codecs/fmf/ooc_pass.h"
@@ -206,6 +209,22 @@ class Krylov {
 // randomized dfmf encode took 9.0 s with 2 M, 7.1 s with 8 M and 7.5 s with 32 M values.
 constexpr size_t k_split_values = size_t(8) << 20;
 
+// dst[0, count) = src[0, count) on the threads (a part is ~100 MB: one thread copies at half
+// the memory's rate), dst written around the caches: it is read again only in the next pass.
+void copy_parallel(const float* src, size_t count, float* dst) {
+  constexpr size_t k_piece = size_t(1) << 18;
+  const int64_t pieces = int64_t((count + k_piece - 1) / k_piece);
+#pragma omp parallel for schedule(static)
+  for (int64_t p = 0; p < pieces; ++p) {
+    const size_t at = size_t(p) * k_piece, end = std::min(count, at + k_piece);
+    size_t i = at;
+    for (; i < end && (reinterpret_cast<uintptr_t>(dst + i) & 15) != 0; ++i) dst[i] = src[i];
+    for (; i + 4 <= end; i += 4) _mm_stream_ps(dst + i, _mm_loadu_ps(src + i));
+    for (; i < end; ++i) dst[i] = src[i];
+  }
+  _mm_sfence();  // the streamed stores before any later read of dst
+}
+
 size_t part_texels(size_t rows, size_t max_count) { return std::max<size_t>(1, std::min(max_count, k_split_values / std::max<size_t>(1, rows))); }
 
 }  // namespace
@@ -238,7 +257,10 @@ Result<std::vector<SvdResult>> streaming_svds(const ChunkSource& src, const std:
   if (split) {
     size_t max_count = 0;
     for (size_t c : chunks) max_count = std::max(max_count, src.chunk_count(c));
-    part = part_texels(m, max_count);
+    part = split->part_values ? std::max<size_t>(1, std::min(max_count, split->part_values / m)) : part_texels(m, max_count);
+    if (split->in_place && channels * m != src.rows())
+      return invalid_argument("streamed SVDs in place: " + std::to_string(channels) + " x " + std::to_string(m) +
+                              " rows per part where the source has " + std::to_string(src.rows()));
     parts.resize(channels * m * part);
   }
   std::vector<float*> outs(channels);
@@ -258,11 +280,15 @@ Result<std::vector<SvdResult>> streaming_svds(const ChunkSource& src, const std:
         for (size_t a = 0; a < active.size(); ++a) ks[active[a]].slice(c, k, src.chunk_first(c), 0, B, k, sums + off[a]);
       } else {
         // Split a part, then every unfinished channel's products on it while it is near the cache.
+        // In place: split once, in the first pass, and keep the matrices where the part was.
         for (size_t o = 0; o < k; o += part) {
           const size_t h = std::min(part, k - o);
-          for (size_t i = 0; i < channels; ++i) outs[i] = parts.data() + i * m * h;
-          split->split(c, o, B + o * src.rows(), h, outs.data());
+          float* const kept = split->in_place ? split->in_place(c, o) : nullptr;
+          const bool convert = !kept || first;
+          for (size_t i = 0; i < channels; ++i) outs[i] = (convert ? parts.data() : kept) + i * m * h;
+          if (convert) split->split(c, o, B + o * src.rows(), h, outs.data());
           for (size_t a = 0; a < active.size(); ++a) ks[active[a]].slice(c, k, src.chunk_first(c), o, outs[active[a]], h, sums + off[a]);
+          if (convert && kept) copy_parallel(parts.data(), channels * m * h, kept);
         }
       }
       for (size_t i : active) ks[i].end_chunk(c);
@@ -271,6 +297,7 @@ Result<std::vector<SvdResult>> streaming_svds(const ChunkSource& src, const std:
       for (size_t a = 0; a < active.size(); ++a) ks[active[a]].pack(d + off[a]);
     };
     BTFC_RETURN_IF_ERROR(run.pass(payload, fn, pack));
+    if (split && split->in_place) std::vector<float>().swap(parts);  // the later passes read the kept parts
     for (size_t a = 0; a < active.size(); ++a) ks[active[a]].end(run.sums().data() + off[a]);
     if (first) BTFC_RETURN_IF_ERROR(src.finish_first_pass(coll));
   }

@@ -75,6 +75,14 @@ struct ChunkSplit {
   int channels = 1;
   size_t rows = 0;
   std::function<void(size_t c, size_t offset, const float* B, size_t count, float* const* out)> split;
+  // Optional: where part (c, offset) of the source lies in writable memory whose values the
+  // caller no longer needs (an in-memory BTF's own, which MatrixChunks maps). The first pass then
+  // stores each part's matrices there, over the values it was split from (matrix i at
+  // + i x rows x count, as `out`), and the later passes read them back instead of splitting
+  // again: color=dfmf converts the BTF once instead of once per pass. The source's values are
+  // lost. Needs channels x rows == the source's rows; the results are bit for bit those without.
+  std::function<float*(size_t c, size_t offset)> in_place;
+  size_t part_values = 0;  // values per matrix in a part; 0: ~8 M (tests take small parts)
 };
 
 // streaming_svd of each of split's matrices (opts[i] for matrix i), all in one stream: every
