@@ -334,10 +334,16 @@ void sketch_times_gaussian(const float* w, size_t h, const Sketch& sketch, Eigen
 
 // Sparse: W = B S in one pass at memory speed (and ||B||_F^2), then W G; dense: B G.
 void column_sketch_product(const float* B, size_t m, size_t n, const Sketch& sketch, Eigen::Ref<MatrixXf> Y, double* energy,
-                           size_t first, std::vector<float>* scratch) {
+                           size_t first, std::vector<float>* scratch, size_t ldb) {
+  if (ldb == 0) ldb = m;
   if (!sketch.sparse()) {
-    thin_product(B, m, n, sketch.G.middleRows(Index(first), Index(n)), Y);
-    if (energy) *energy = squared_norm(B, m * n);
+    thin_product(B, m, n, sketch.G.middleRows(Index(first), Index(n)), Y, ldb);
+    if (energy) {
+      *energy = 0;
+      if (ldb == m) *energy = squared_norm(B, m * n);
+      else
+        for (size_t j = 0; j < n; ++j) *energy += squared_norm(B + j * ldb, m);  // column by column, in order
+    }
     return;
   }
   // By blocks of rows, so the sketch W = B S (m x s) is never whole: a reused rows x s buffer.
@@ -349,15 +355,16 @@ void column_sketch_product(const float* B, size_t m, size_t n, const Sketch& ske
   for (size_t i0 = 0; i0 < m; i0 += rows) {
     const size_t h = std::min(rows, m - i0);
     double e = 0;
-    sparse_sign_columns(B + i0, m, h, n, sketch.S, w.data(), energy ? &e : nullptr, first);
+    sparse_sign_columns(B + i0, ldb, h, n, sketch.S, w.data(), energy ? &e : nullptr, first);
     if (energy) *energy += e;  // in block order: independent of the thread count
     sketch_times_gaussian(w.data(), h, sketch, Y.middleRows(Index(i0), Index(h)));
   }
 }
 
-void column_sketch_sums(const float* B, size_t m, size_t n, const Sketch& sketch, float* W, double* energy, size_t first) {
+void column_sketch_sums(const float* B, size_t m, size_t n, const Sketch& sketch, float* W, double* energy, size_t first,
+                        size_t ldb) {
   double e = 0;
-  sparse_sign_columns(B, m, m, n, sketch.S, W, energy ? &e : nullptr, first, true);
+  sparse_sign_columns(B, ldb ? ldb : m, m, n, sketch.S, W, energy ? &e : nullptr, first, true);
   if (energy) *energy += e;
 }
 

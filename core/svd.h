@@ -119,9 +119,9 @@ Sketch make_column_sketch(size_t n, Eigen::Index l, const SvdOptions& opt);
 // Y = B Pi (m x l, sized by the caller), setting *energy = ||B||_F^2 when given (B m x n
 // column-major). A chunk of B's columns, texels [first, first + n) of the sketch's, gives its
 // part of the sum. `scratch`, when given, holds the sketch's row blocks from call to call (fresh
-// pages cost more than the pass on some VMs).
+// pages cost more than the pass on some VMs). `ldb`: B's leading dimension (0: m).
 void column_sketch_product(const float* B, size_t m, size_t n, const Sketch& sketch, Eigen::Ref<Eigen::MatrixXf> Y,
-                           double* energy = nullptr, size_t first = 0, std::vector<float>* scratch = nullptr);
+                           double* energy = nullptr, size_t first = 0, std::vector<float>* scratch = nullptr, size_t ldb = 0);
 // The scratch column_sketch_product takes for B m x n at l columns: at most 16 MiB and at most the
 // n l floats of a dense Pi (0 when dense: Pi itself is then n x l).
 size_t column_sketch_bytes(size_t m, size_t n, Eigen::Index l);
@@ -131,7 +131,8 @@ size_t column_sketch_bytes(size_t m, size_t n, Eigen::Index l);
 // one per chunk (2 m s l flops each: a fifth of the streamed pass at UBO2003 size), for
 // column_sketch_sums_bytes(m, n, l) bytes of W (0: the sketch is dense, use
 // column_sketch_product).
-void column_sketch_sums(const float* B, size_t m, size_t n, const Sketch& sketch, float* W, double* energy, size_t first);
+void column_sketch_sums(const float* B, size_t m, size_t n, const Sketch& sketch, float* W, double* energy, size_t first,
+                        size_t ldb = 0);
 void column_sketch_finish(const float* W, size_t m, const Sketch& sketch, Eigen::Ref<Eigen::MatrixXf> Y);
 size_t column_sketch_sums_bytes(size_t m, size_t n, Eigen::Index l);
 

@@ -25,6 +25,7 @@ namespace btfc {
 using Eigen::Index;
 using MatrixXfR = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 using ConstMapF = Eigen::Map<const Eigen::MatrixXf>;
+using ConstStridedF = Eigen::Map<const Eigen::MatrixXf, 0, Eigen::OuterStride<>>;  // B with its leading dimension
 
 namespace {
 
@@ -88,8 +89,8 @@ struct TnGroup {
 // not padded to 48). With `energy`, also ||B||_F^2: each tile's columns are summed again right
 // after the tile, from L2 (+4 % of the pass), instead of in a separate pass over memory (which
 // took half a pass's time). Squares sums a column segment's squares.
-void tn_driver(const float* B, size_t m, size_t n, const std::vector<TnGroup>& groups, const float* Yr, float* Zr, double* energy,
-               double (*squares)(const float*, size_t)) {
+void tn_driver(const float* B, size_t ldb, size_t m, size_t n, const std::vector<TnGroup>& groups, const float* Yr, float* Zr,
+               double* energy, double (*squares)(const float*, size_t)) {
   constexpr size_t k_rows = 2048;  // a chunk of Y's rows: 2048 x L floats, in L2
   // Texels per parallel task: whole tiles of every group. With 64, NV 2 (TJ 14) left 8 texels of
   // every task to one-column tiles and ran at 275 GFLOP/s instead of 375 (l = 32,
@@ -112,13 +113,13 @@ void tn_driver(const float* B, size_t m, size_t n, const std::vector<TnGroup>& g
         const bool sum = energy && g == 0;  // the squares of the first group's tile, from L1/L2
         size_t j = j0;
         for (; j + G.tj <= j1; j += G.tj) {
-          G.tile(B, m, Yr + y_at[g], k0, k1, j, Zr + z_at[g], k0 == 0);
+          G.tile(B, ldb, Yr + y_at[g], k0, k1, j, Zr + z_at[g], k0 == 0);
           if (sum)
-            for (size_t t = 0; t < G.tj; ++t) e += squares(B + (j + t) * m + k0, k1 - k0);
+            for (size_t t = 0; t < G.tj; ++t) e += squares(B + (j + t) * ldb + k0, k1 - k0);
         }
         for (; j < j1; ++j) {
-          G.tile1(B, m, Yr + y_at[g], k0, k1, j, Zr + z_at[g], k0 == 0);
-          if (sum) e += squares(B + j * m + k0, k1 - k0);
+          G.tile1(B, ldb, Yr + y_at[g], k0, k1, j, Zr + z_at[g], k0 == 0);
+          if (sum) e += squares(B + j * ldb + k0, k1 - k0);
         }
       }
     }
@@ -218,7 +219,7 @@ __attribute__((target("avx512f"))) void nn_tile_avx512(const float* B, size_t ld
 
 // Rows [0, m / R * R) of Yp (m x lp column-major); Xr: n x lp row-major, lp a multiple of CC.
 template <int TK, int CC>
-void thin_nn(const float* B, size_t m, size_t n, const float* Xr, size_t lp, float* Yp) {
+void thin_nn(const float* B, size_t ldb, size_t m, size_t n, const float* Xr, size_t lp, float* Yp) {
   constexpr size_t R = 16 * TK;
   static_assert(k_nn_rows % R == 0, "a task holds whole row tiles");
   const size_t mfull = m / R * R;
@@ -230,7 +231,7 @@ void thin_nn(const float* B, size_t m, size_t n, const float* Xr, size_t lp, flo
       const size_t j1 = std::min(n, j0 + k_nn_texels);
       for (size_t k = k0; k < k1; k += R) {
         const bool prefetch = k + (k_nn_ahead + 1) * R <= m;
-        for (size_t c0 = 0; c0 < lp; c0 += CC) nn_tile_avx512<TK, CC>(B, m, Xr, lp, k, j0, j1, c0, Yp, m, j0 == 0, prefetch && c0 == 0);
+        for (size_t c0 = 0; c0 < lp; c0 += CC) nn_tile_avx512<TK, CC>(B, ldb, Xr, lp, k, j0, j1, c0, Yp, m, j0 == 0, prefetch && c0 == 0);
       }
     }
   }
@@ -249,8 +250,8 @@ int slices_for(size_t work) {
   return int(std::clamp<size_t>(work / 64, 1, size_t(2 * threads)));
 }
 
-void eigen_tn(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z) {
-  ConstMapF map(B, Index(m), Index(n));
+void eigen_tn(const float* B, size_t ldb, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z) {
+  ConstStridedF map(B, Index(m), Index(n), Eigen::OuterStride<>(Index(ldb)));
   const int parts = slices_for(n);
   const SingleThreadedBlas one_blas_thread(parts > 1);
 #pragma omp parallel for schedule(dynamic, 1) if (parts > 1)
@@ -260,8 +261,8 @@ void eigen_tn(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref
   }
 }
 
-void eigen_nn(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::Ref<Eigen::MatrixXf> Y) {
-  ConstMapF map(B, Index(m), Index(n));
+void eigen_nn(const float* B, size_t ldb, size_t m, size_t n, const ConstRefF& X, Eigen::Ref<Eigen::MatrixXf> Y) {
+  ConstStridedF map(B, Index(m), Index(n), Eigen::OuterStride<>(Index(ldb)));
   const int parts = slices_for(m);
   const SingleThreadedBlas one_blas_thread(parts > 1);
 #pragma omp parallel for schedule(dynamic, 1) if (parts > 1)
@@ -273,14 +274,14 @@ void eigen_nn(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::Ref
 
 }  // namespace
 
-void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::MatrixXf& Z, double* energy) {
+void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::MatrixXf& Z, double* energy, size_t ldb) {
   Z.resize(Index(n), Y.cols());
-  transposed_product(B, m, n, Y, Eigen::Ref<Eigen::MatrixXf>(Z), energy);
+  transposed_product(B, m, n, Y, Eigen::Ref<Eigen::MatrixXf>(Z), energy, ldb);
 }
 
-void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::MatrixXf& Y) {
+void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::MatrixXf& Y, size_t ldb) {
   Y.resize(Index(m), X.cols());
-  thin_product(B, m, n, X, Eigen::Ref<Eigen::MatrixXf>(Y));
+  thin_product(B, m, n, X, Eigen::Ref<Eigen::MatrixXf>(Y), ldb);
 }
 
 namespace {
@@ -320,8 +321,8 @@ class Staging {
 
 // Z = B^T Y through tn_driver on Y's columns in `groups` (widths summing to at least l; the
 // padding zero), copied row-major into huge pages.
-void tn_padded(const std::vector<TnGroup>& groups, double (*squares)(const float*, size_t), const float* B, size_t m, size_t n,
-               const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy) {
+void tn_padded(const std::vector<TnGroup>& groups, double (*squares)(const float*, size_t), const float* B, size_t ldb, size_t m,
+               size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy) {
   const Index l = Y.cols();
   size_t width = 0;
   for (const TnGroup& g : groups) width += g.L;
@@ -337,7 +338,7 @@ void tn_padded(const std::vector<TnGroup>& groups, double (*squares)(const float
     Yr.rightCols(L - w).setZero();
     y_at += m * g.L, c0 += L;
   }
-  tn_driver(B, m, n, groups, yr, zr, energy, squares);
+  tn_driver(B, ldb, m, n, groups, yr, zr, energy, squares);
   c0 = 0;
   for (const TnGroup& g : groups) {
     const Index L = Index(g.L), w = std::max<Index>(0, std::min(L, l - c0));
@@ -350,7 +351,7 @@ void tn_padded(const std::vector<TnGroup>& groups, double (*squares)(const float
 // The AVX2 kernel where it applies (AVX2 + FMA, l <= k_tn_avx2_max); false otherwise. Up to 32
 // columns in one group; wider, groups of 24 (NV 3, TJ 4: the widest tile that keeps 4 texels)
 // and one of the remaining 8 or 16 (40 = 24 + 16: a fifth less work than two groups of 24).
-bool tn_avx2(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy) {
+bool tn_avx2(const float* B, size_t ldb, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy) {
   const Index l = Y.cols(), nv = (l + 7) / 8;
   if (!cpu_has_avx2_fma() || l < 1 || l > k_tn_avx2_max || m < 1 || n < 1) return false;
   const TnGroup k_groups[4] = {tn_group_avx2<1>(), tn_group_avx2<2>(), tn_group_avx2<3>(), tn_group_avx2<4>()};
@@ -360,31 +361,42 @@ bool tn_avx2(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<
     groups.assign(size_t(nv / 3), k_groups[2]);
     if (nv % 3) groups.push_back(k_groups[nv % 3 - 1]);
   }
-  tn_padded(groups, block_squares, B, m, n, Y, Z, energy);
+  tn_padded(groups, block_squares, B, ldb, m, n, Y, Z, energy);
   return true;
 }
 #endif
 }  // namespace
 
-void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy) {
+void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy,
+                        size_t ldb) {
+  if (ldb == 0) ldb = m;
 #ifdef BTFC_THIN_AVX512
   const Index nv = (Y.cols() + 15) / 16;
   if (cpu_has_avx512f() && nv >= 1 && nv <= 8 && m >= 1 && n >= 1) {
     const TnGroup k_groups[8] = {tn_group_avx512<1>(), tn_group_avx512<2>(), tn_group_avx512<3>(), tn_group_avx512<4>(),
                                  tn_group_avx512<5>(), tn_group_avx512<6>(), tn_group_avx512<7>(), tn_group_avx512<8>()};
-    tn_padded({k_groups[nv - 1]}, squares_avx512, B, m, n, Y, Z, energy);
+    tn_padded({k_groups[nv - 1]}, squares_avx512, B, ldb, m, n, Y, Z, energy);
     return;
   }
-  if (tn_avx2(B, m, n, Y, Z, energy)) return;
+  if (tn_avx2(B, ldb, m, n, Y, Z, energy)) return;
 #endif
-  eigen_tn(B, m, n, Y, Z);
-  if (energy) *energy = squared_norm(B, m * n);
+  eigen_tn(B, ldb, m, n, Y, Z);
+  if (!energy) return;
+  if (ldb == m) {
+    *energy = squared_norm(B, m * n);
+    return;
+  }
+  std::vector<double> part(n);  // per column, then summed in order: independent of the thread count
+#pragma omp parallel for schedule(static)
+  for (int64_t j = 0; j < int64_t(n); ++j) part[size_t(j)] = block_squares(B + size_t(j) * ldb, m);
+  *energy = 0;
+  for (double v : part) *energy += v;
 }
 
 bool transposed_product_avx2(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::MatrixXf& Z, double* energy) {
 #ifdef BTFC_THIN_AVX512
   Z.resize(Index(n), Y.cols());
-  return tn_avx2(B, m, n, Y, Z, energy);
+  return tn_avx2(B, m, m, n, Y, Z, energy);
 #else
   (void)B, (void)m, (void)n, (void)Y, (void)Z, (void)energy;
   return false;
@@ -394,7 +406,7 @@ bool transposed_product_avx2(const float* B, size_t m, size_t n, const ConstRefF
 namespace {
 
 // Y = B X through the AVX-512 tiles (thin_nn); false where they do not apply (Y not written).
-bool nn_tiles(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::Ref<Eigen::MatrixXf> Y) {
+bool nn_tiles(const float* B, size_t ldb, size_t m, size_t n, const ConstRefF& X, Eigen::Ref<Eigen::MatrixXf> Y) {
 #ifdef BTFC_THIN_AVX512
   const Index l = X.cols();
   constexpr size_t R = 32;  // rows per tile (TK = 2)
@@ -406,15 +418,15 @@ bool nn_tiles(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::Ref
   Eigen::Map<Eigen::MatrixXf> Yp(yp_buf.data(), Index(m), lp);
   Xr.leftCols(l) = X;
   Xr.rightCols(lp - l).setZero();
-  if (cc == 12) thin_nn<2, 12>(B, m, n, Xr.data(), size_t(lp), Yp.data());
-  else thin_nn<2, 8>(B, m, n, Xr.data(), size_t(lp), Yp.data());
+  if (cc == 12) thin_nn<2, 12>(B, ldb, m, n, Xr.data(), size_t(lp), Yp.data());
+  else thin_nn<2, 8>(B, ldb, m, n, Xr.data(), size_t(lp), Yp.data());
   const Index mfull = Index(m / R * R), tail = Index(m) - mfull;
   Y = Yp.leftCols(l);
-  ConstMapF map(B, Index(m), Index(n));
+  ConstStridedF map(B, Index(m), Index(n), Eigen::OuterStride<>(Index(ldb)));
   if (tail > 0) Y.bottomRows(tail).noalias() = map.bottomRows(tail) * X;
   return true;
 #else
-  (void)B, (void)m, (void)n, (void)X, (void)Y;
+  (void)B, (void)ldb, (void)m, (void)n, (void)X, (void)Y;
   return false;
 #endif
 }
@@ -424,14 +436,15 @@ bool nn_tiles(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::Ref
 // The tiles on AMD's AVX-512 CPUs (Zen 5: 280-290 GFLOP/s against OpenBLAS's 210-270); on Intel's
 // OpenBLAS's SkylakeX sgemm, which packs B but still beat them on a 2-core Xeon VM (a whole rank-32
 // q 1 SVD of the UBO2003-size matrix 1.78 s against 2.04-2.13 s; docs/benchmarks.md, 2026-12-04).
-void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::Ref<Eigen::MatrixXf> Y) {
-  if (!cpu_is_intel() && nn_tiles(B, m, n, X, Y)) return;
-  eigen_nn(B, m, n, X, Y);
+void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::Ref<Eigen::MatrixXf> Y, size_t ldb) {
+  if (ldb == 0) ldb = m;
+  if (!cpu_is_intel() && nn_tiles(B, ldb, m, n, X, Y)) return;
+  eigen_nn(B, ldb, m, n, X, Y);
 }
 
 bool thin_product_tiles(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::MatrixXf& Y) {
   Y.resize(Index(m), X.cols());
-  return nn_tiles(B, m, n, X, Y);
+  return nn_tiles(B, m, m, n, X, Y);
 }
 
 double squared_norm(const float* B, size_t count) {

@@ -20,10 +20,13 @@ namespace btfc {
 
 // Z = B^T Y: Z n x l, Y m x l. With `energy`, also *energy = ||B||_F^2 (= squared_norm(B, m n)
 // to round-off; the kernel sums it during the pass, from cache). A MatrixXf Z is resized; a Ref
-// (a map of the caller's memory, e.g. huge pages) must already be n x l.
+// (a map of the caller's memory, e.g. huge pages) must already be n x l. `ldb`: B's leading
+// dimension when B is the first m rows of a taller matrix (0: m); the same bits either way.
 using ConstRefF = Eigen::Ref<const Eigen::MatrixXf>;
-void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy = nullptr);
-void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::MatrixXf& Z, double* energy = nullptr);
+void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy = nullptr,
+                        size_t ldb = 0);
+void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::MatrixXf& Z, double* energy = nullptr,
+                        size_t ldb = 0);
 
 // For tests: transposed_product through its AVX2 kernel (the one CPUs without AVX-512 run for
 // l <= 96) on any CPU with AVX2 + FMA. Returns false where that kernel does not apply (Z is then
@@ -31,8 +34,9 @@ void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, 
 bool transposed_product_avx2(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::MatrixXf& Z, double* energy = nullptr);
 
 // Y = B X: Y m x l, X n x l, different memory. A MatrixXf Y is resized; a Ref must be m x l.
-void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::Ref<Eigen::MatrixXf> Y);
-void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::MatrixXf& Y);
+// `ldb` as above (0: m).
+void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::Ref<Eigen::MatrixXf> Y, size_t ldb = 0);
+void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::MatrixXf& Y, size_t ldb = 0);
 // For tests: thin_product through the AVX-512 tiles on any CPU with AVX-512 (Intel's take
 // OpenBLAS in thin_product). Returns false where the tiles do not apply (Y resized, not written).
 bool thin_product_tiles(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::MatrixXf& Y);

@@ -303,8 +303,8 @@ TEST(StreamingDfmf, ConsumedInputGivesTheSameModel) {
 }
 
 // ChunkSplit::in_place over chunks and parts of several sizes: the results are those of
-// splitting in every pass, bit for bit, each part is split once (the later passes read it
-// back), and the source's memory holds each part's matrices after the stream.
+// splitting into part buffers in every pass, bit for bit, each part is split once (the later
+// passes read it back), and each texel's column holds its matrices' columns after the stream.
 TEST(StreamingDfmf, InPlaceSplitKeepsEachPartWhereItWas) {
   const Btf b = noisy(6, 5);  // 486 rows (162 x RGB) x 30 texels
   const size_t in_rows = b.desc().abrdf_size(), m = in_rows / 3, n = b.desc().num_texels();
@@ -312,20 +312,29 @@ TEST(StreamingDfmf, InPlaceSplitKeepsEachPartWhereItWas) {
   o.max_rank = 3, o.oversample = 3, o.power_iters = 2, o.method = SvdMethod::randomized;
   const std::vector<SvdOptions> opts{o, o, o};
   // Matrix i: rows i, i + 3, ... of the source, times i + 1 (a deinterleave, as the colour split).
+  auto value = [&](const float* col, size_t i, size_t r) { return col[3 * r + i] * float(i + 1); };
   size_t splits = 0;
-  auto split_fn = [&](size_t, size_t, const float* B, size_t count, float* const* out) {
+  fmf::ChunkSplit plain, in_place;
+  plain.channels = in_place.channels = 3, plain.rows = in_place.rows = m;
+  plain.part_values = in_place.part_values = 3 * m;  // parts of 3 texels: 3 + 3 + 1 in a chunk of 7
+  plain.split = [&](size_t, size_t, const float* B, size_t count, float* const* out) {
     ++splits;
     for (size_t t = 0; t < count; ++t)
       for (size_t r = 0; r < m; ++r)
-        for (size_t i = 0; i < 3; ++i) out[i][t * m + r] = B[t * in_rows + 3 * r + i] * float(i + 1);
+        for (size_t i = 0; i < 3; ++i) out[i][t * m + r] = value(B + t * in_rows, i, r);
   };
   Btf kept = b;
-  fmf::ChunkSplit plain, in_place;
-  plain.channels = in_place.channels = 3, plain.rows = in_place.rows = m;
-  plain.split = in_place.split = split_fn;
-  plain.part_values = in_place.part_values = 3 * m;  // parts of 3 texels: 3 + 3 + 1 in a chunk of 7
   const MatrixChunks src(b.data(), in_rows, n, 7), dst(kept.data(), in_rows, n, 7);
   in_place.in_place = [&](size_t c, size_t off) { return kept.data() + (dst.chunk_first(c) + off) * in_rows; };
+  in_place.split_in_place = [&](size_t, size_t, float* B, size_t count) {
+    ++splits;
+    std::vector<float> col(in_rows);
+    for (size_t t = 0; t < count; ++t) {
+      for (size_t i = 0; i < 3; ++i)
+        for (size_t r = 0; r < m; ++r) col[i * m + r] = value(B + t * in_rows, i, r);
+      std::copy(col.begin(), col.end(), B + t * in_rows);
+    }
+  };
   Collective one;
   StreamStats st;
   auto want = fmf::streaming_svds(src, owned_chunks(src, 0, 1), &plain, opts, one);
@@ -340,13 +349,15 @@ TEST(StreamingDfmf, InPlaceSplitKeepsEachPartWhereItWas) {
     EXPECT_TRUE(want.value()[i].U == got.value()[i].U && want.value()[i].SxV == got.value()[i].SxV && want.value()[i].S == got.value()[i].S)
         << "matrix " << i;
   }
-  // Texel 8 is chunk 1's second texel, in its first part (texels 7-9): matrix i's column 1 there.
-  const float* part = kept.data() + 7 * in_rows;
-  for (size_t i = 0; i < 3; ++i)
-    for (size_t r = 0; r < m; ++r) ASSERT_EQ(part[i * m * 3 + 1 * m + r], b.abrdf(8)[3 * r + i] * float(i + 1)) << i << ", " << r;
-  // A split that does not fill the source's rows is refused.
+  for (size_t t : {size_t(0), size_t(8), n - 1})
+    for (size_t i = 0; i < 3; ++i)
+      for (size_t r = 0; r < m; ++r) ASSERT_EQ(kept.abrdf(t)[i * m + r], value(b.abrdf(t), i, r)) << t << ", " << i << ", " << r;
+  // A split in place that does not fill the source's rows, or without its transform, is refused.
   fmf::ChunkSplit bad = in_place;
   bad.rows = m - 1;
+  EXPECT_FALSE(fmf::streaming_svds(dst, owned_chunks(dst, 0, 1), &bad, opts, one).ok());
+  bad = in_place;
+  bad.split_in_place = nullptr;
   EXPECT_FALSE(fmf::streaming_svds(dst, owned_chunks(dst, 0, 1), &bad, opts, one).ok());
 }
 

@@ -1,6 +1,9 @@
 // dfmf channel chunk sources; see ooc_dfmf.h.
 #include "codecs/fmf/ooc_dfmf.h"
 
+#include <cstring>
+#include <vector>
+
 #include "codecs/fmf/fmf.h"
 
 namespace btfc {
@@ -110,7 +113,25 @@ Result<std::vector<SvdResult>> dfmf_streaming_svds(const ChunkSource& base, cons
     }
     per_chunk[c] = (o == 0 ? 0 : per_chunk[c]) + n;
   };
-  if (in_place) split.in_place = [&](size_t c, size_t o) { return in_place + (base.chunk_first(c) + o) * in_rows; };
+  if (in_place) {
+    // Each texel's RGB column becomes its Y', U', V' columns, one after the other, through a
+    // per-thread column (in L2) copied back over it.
+    split.in_place = [&](size_t c, size_t o) { return in_place + (base.chunk_first(c) + o) * in_rows; };
+    split.split_in_place = [&](size_t c, size_t o, float* B, size_t k) {
+      uint64_t n = 0;
+#pragma omp parallel reduction(+ : n)
+      {
+        std::vector<float> col(in_rows);
+#pragma omp for schedule(static)
+        for (long long t = 0; t < (long long)k; ++t) {
+          float* const b = B + size_t(t) * in_rows;
+          n += dfmf_channels(b, rows, offset, col.data(), col.data() + rows, col.data() + 2 * rows);
+          std::memcpy(b, col.data(), in_rows * sizeof(float));
+        }
+      }
+      per_chunk[c] = (o == 0 ? 0 : per_chunk[c]) + n;
+    };
+  }
   auto rs = fmf::streaming_svds(base, chunks, &split, {opt_y, opt_c, opt_c}, coll, stats, kept_blocks);
   for (size_t c : chunks) *clamped += double(per_chunk[c]);
   return rs;

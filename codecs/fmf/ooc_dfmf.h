@@ -68,8 +68,9 @@ class DfmfChannelSource final : public ChunkSource {
 // counted once). Besides streaming_svd's memory per channel, the parts take at most a chunk's
 // values in floats. With `in_place`, the writable memory `base` maps (its values, column-major
 // rows x texels, as MatrixChunks over an in-memory BTF) whose values the caller no longer needs:
-// each part is converted once, in the first pass, and kept there (ChunkSplit::in_place); the
-// parts' buffer goes after that pass. The same results, bit for bit.
+// each texel's column is converted once, in the first pass, into its Y', U' and V' columns one
+// after the other, and the passes read the channels there (ChunkSplit::in_place; no parts are
+// held). The same results, bit for bit.
 Result<std::vector<SvdResult>> dfmf_streaming_svds(const ChunkSource& base, const std::vector<size_t>& chunks, float offset,
                                                    const SvdOptions& opt_y, const SvdOptions& opt_c, Collective& coll,
                                                    StreamStats* stats, int kept_blocks, double* clamped, float* in_place = nullptr);

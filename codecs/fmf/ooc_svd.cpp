@@ -4,9 +4,6 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
-#include <cstdint>
-#include <cstring>
-#include <xmmintrin.h>
 #include <vector>
 
 #include "codecs/fmf/ooc_pass.h"
@@ -52,34 +49,34 @@ class Krylov {
   }
 
   // Columns [o, o + k) of owned chunk c (count texels in all, the first of them texel `first`
-  // of B), B: m x k. Every pass sums its m x l block straight into `sums` (zeroed before the
+  // of B), B: m x k, leading dimension ldb. Every pass sums its m x l block straight into `sums` (zeroed before the
   // chunks, ooc_pass.h): no second m x l copy in double.
-  void slice(size_t c, size_t count, size_t first, size_t o, const float* B, size_t k, double* sums) {
+  void slice(size_t c, size_t count, size_t first, size_t o, const float* B, size_t k, size_t ldb, double* sums) {
     auto acc = Eigen::Map<MatrixXd>(sums, Index(m_m), m_l);
     switch (m_phase) {
       case Phase::sketch: {  // Y = B Pi: the chunk's part, through the sparse sign sketch ~ a read
         if (m_sketch.sparse() && m_opt.sketch_sums) {  // W += B S here, Y = W G once, in pack()
           if (m_w_sums.empty()) m_w_sums.assign(m_m * m_sketch.S.s, 0.0f);
-          column_sketch_sums(B, m_m, k, m_sketch, m_w_sums.data(), &m_energy, first + o);
+          column_sketch_sums(B, m_m, k, m_sketch, m_w_sums.data(), &m_energy, first + o, ldb);
           break;
         }
         double e = 0;
         m_y.resize(Index(m_m), m_l);
-        column_sketch_product(B, m_m, k, m_sketch, m_y, &e, first + o, &m_scratch);
+        column_sketch_product(B, m_m, k, m_sketch, m_y, &e, first + o, &m_scratch, ldb);
         m_energy += e;
         add_into(acc, m_y);
         break;
       }
       case Phase::power: {  // Y = B B^T Q_b; Z = B^T Q_b is block b of W^T, kept
         auto Z = wt_block(c, count, Index(m_in_p - 1) * m_l).middleRows(Index(o), Index(k));
-        transposed_product(B, m_m, k, m_q, Z);
-        thin_product(B, m_m, k, Z, m_y);
+        transposed_product(B, m_m, k, m_q, Z, nullptr, ldb);
+        thin_product(B, m_m, k, Z, m_y, ldb);
         add_into(acc, m_y);
         break;
       }
       case Phase::project: {  // the newest block's B^T Q completes W^T
         auto Z = wt_block(c, count, m_w - m_l).middleRows(Index(o), Index(k));
-        transposed_product(B, m_m, k, m_q, Z);
+        transposed_product(B, m_m, k, m_q, Z, nullptr, ldb);
         break;
       }
       case Phase::done:
@@ -209,22 +206,6 @@ class Krylov {
 // randomized dfmf encode took 9.0 s with 2 M, 7.1 s with 8 M and 7.5 s with 32 M values.
 constexpr size_t k_split_values = size_t(8) << 20;
 
-// dst[0, count) = src[0, count) on the threads (a part is ~100 MB: one thread copies at half
-// the memory's rate), dst written around the caches: it is read again only in the next pass.
-void copy_parallel(const float* src, size_t count, float* dst) {
-  constexpr size_t k_piece = size_t(1) << 18;
-  const int64_t pieces = int64_t((count + k_piece - 1) / k_piece);
-#pragma omp parallel for schedule(static)
-  for (int64_t p = 0; p < pieces; ++p) {
-    const size_t at = size_t(p) * k_piece, end = std::min(count, at + k_piece);
-    size_t i = at;
-    for (; i < end && (reinterpret_cast<uintptr_t>(dst + i) & 15) != 0; ++i) dst[i] = src[i];
-    for (; i + 4 <= end; i += 4) _mm_stream_ps(dst + i, _mm_loadu_ps(src + i));
-    for (; i < end; ++i) dst[i] = src[i];
-  }
-  _mm_sfence();  // the streamed stores before any later read of dst
-}
-
 size_t part_texels(size_t rows, size_t max_count) { return std::max<size_t>(1, std::min(max_count, k_split_values / std::max<size_t>(1, rows))); }
 
 }  // namespace
@@ -258,10 +239,10 @@ Result<std::vector<SvdResult>> streaming_svds(const ChunkSource& src, const std:
     size_t max_count = 0;
     for (size_t c : chunks) max_count = std::max(max_count, src.chunk_count(c));
     part = split->part_values ? std::max<size_t>(1, std::min(max_count, split->part_values / m)) : part_texels(m, max_count);
-    if (split->in_place && channels * m != src.rows())
+    if (bool(split->in_place) != bool(split->split_in_place) || (split->in_place && channels * m != src.rows()))
       return invalid_argument("streamed SVDs in place: " + std::to_string(channels) + " x " + std::to_string(m) +
-                              " rows per part where the source has " + std::to_string(src.rows()));
-    parts.resize(channels * m * part);
+                              " rows per part where the source has " + std::to_string(src.rows()) + ", or no split in place");
+    if (!split->in_place) parts.resize(channels * m * part);
   }
   std::vector<float*> outs(channels);
   for (bool first = true;; first = false) {
@@ -277,18 +258,24 @@ Result<std::vector<SvdResult>> streaming_svds(const ChunkSource& src, const std:
     auto fn = [&](size_t c, const float* B, size_t k) {
       double* sums = run.sums().data();
       if (!split) {
-        for (size_t a = 0; a < active.size(); ++a) ks[active[a]].slice(c, k, src.chunk_first(c), 0, B, k, sums + off[a]);
+        for (size_t a = 0; a < active.size(); ++a) ks[active[a]].slice(c, k, src.chunk_first(c), 0, B, k, m, sums + off[a]);
       } else {
         // Split a part, then every unfinished channel's products on it while it is near the cache.
-        // In place: split once, in the first pass, and keep the matrices where the part was.
+        // In place: split once, in the first pass, each column where it was (ChunkSplit).
         for (size_t o = 0; o < k; o += part) {
           const size_t h = std::min(part, k - o);
-          float* const kept = split->in_place ? split->in_place(c, o) : nullptr;
-          const bool convert = !kept || first;
-          for (size_t i = 0; i < channels; ++i) outs[i] = (convert ? parts.data() : kept) + i * m * h;
-          if (convert) split->split(c, o, B + o * src.rows(), h, outs.data());
-          for (size_t a = 0; a < active.size(); ++a) ks[active[a]].slice(c, k, src.chunk_first(c), o, outs[active[a]], h, sums + off[a]);
-          if (convert && kept) copy_parallel(parts.data(), channels * m * h, kept);
+          size_t ld = m;
+          if (split->in_place) {
+            float* const at = split->in_place(c, o);
+            if (first) split->split_in_place(c, o, at, h);
+            for (size_t i = 0; i < channels; ++i) outs[i] = at + i * m;
+            ld = src.rows();
+          } else {
+            for (size_t i = 0; i < channels; ++i) outs[i] = parts.data() + i * m * h;
+            split->split(c, o, B + o * src.rows(), h, outs.data());
+          }
+          for (size_t a = 0; a < active.size(); ++a)
+            ks[active[a]].slice(c, k, src.chunk_first(c), o, outs[active[a]], h, ld, sums + off[a]);
         }
       }
       for (size_t i : active) ks[i].end_chunk(c);
@@ -297,7 +284,6 @@ Result<std::vector<SvdResult>> streaming_svds(const ChunkSource& src, const std:
       for (size_t a = 0; a < active.size(); ++a) ks[active[a]].pack(d + off[a]);
     };
     BTFC_RETURN_IF_ERROR(run.pass(payload, fn, pack));
-    if (split && split->in_place) std::vector<float>().swap(parts);  // the later passes read the kept parts
     for (size_t a = 0; a < active.size(); ++a) ks[active[a]].end(run.sums().data() + off[a]);
     if (first) BTFC_RETURN_IF_ERROR(src.finish_first_pass(coll));
   }

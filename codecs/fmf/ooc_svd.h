@@ -75,13 +75,17 @@ struct ChunkSplit {
   int channels = 1;
   size_t rows = 0;
   std::function<void(size_t c, size_t offset, const float* B, size_t count, float* const* out)> split;
-  // Optional: where part (c, offset) of the source lies in writable memory whose values the
-  // caller no longer needs (an in-memory BTF's own, which MatrixChunks maps). The first pass then
-  // stores each part's matrices there, over the values it was split from (matrix i at
-  // + i x rows x count, as `out`), and the later passes read them back instead of splitting
-  // again: color=dfmf converts the BTF once instead of once per pass. The source's values are
-  // lost. Needs channels x rows == the source's rows; the results are bit for bit those without.
+  // Optional, both or neither: where part (c, offset) of the source lies in writable memory
+  // whose values the caller no longer needs (an in-memory BTF's own, which MatrixChunks maps),
+  // and the split done there: split_in_place turns each of the part's `count` columns (the
+  // source's rows) into its values of matrix 0, then 1, ... (`rows` each), so that matrix i is
+  // the part's columns from row i x rows on (leading dimension: the source's rows). The first
+  // pass splits each part so, the later passes read the matrices back without splitting again
+  // and no part buffer is held: color=dfmf converts the BTF once instead of once per pass. The
+  // source's values are lost. Needs channels x rows == the source's rows; the results are bit
+  // for bit those of `split` when both give the same values.
   std::function<float*(size_t c, size_t offset)> in_place;
+  std::function<void(size_t c, size_t offset, float* B, size_t count)> split_in_place;
   size_t part_values = 0;  // values per matrix in a part; 0: ~8 M (tests take small parts)
 };
 
