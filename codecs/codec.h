@@ -30,8 +30,8 @@ struct Context {
   size_t max_bytes = memory_limit();  // core/limits.h: BTFC_MAX_MEMORY or set_memory_limit()
   // The encode's input, when the caller no longer needs its values (`btfc compress`: the BTF it
   // read): an encoder may then use them as scratch memory and leave them changed (fmf's
-  // color=dfmf converts each part of it once instead of once per pass). Any other BTF, or null:
-  // the input is left as it was.
+  // color=dfmf converts it to its colour channels in place, once instead of once per pass). Any
+  // other BTF, or null: the input is left as it was.
   Btf* consumable = nullptr;
 };
 

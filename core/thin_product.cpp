@@ -393,12 +393,12 @@ void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, 
   for (double v : part) *energy += v;
 }
 
-bool transposed_product_avx2(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::MatrixXf& Z, double* energy) {
+bool transposed_product_avx2(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::MatrixXf& Z, double* energy, size_t ldb) {
 #ifdef BTFC_THIN_AVX512
   Z.resize(Index(n), Y.cols());
-  return tn_avx2(B, m, m, n, Y, Z, energy);
+  return tn_avx2(B, ldb ? ldb : m, m, n, Y, Z, energy);
 #else
-  (void)B, (void)m, (void)n, (void)Y, (void)Z, (void)energy;
+  (void)B, (void)m, (void)n, (void)Y, (void)Z, (void)energy, (void)ldb;
   return false;
 #endif
 }
@@ -442,9 +442,9 @@ void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen:
   eigen_nn(B, ldb, m, n, X, Y);
 }
 
-bool thin_product_tiles(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::MatrixXf& Y) {
+bool thin_product_tiles(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::MatrixXf& Y, size_t ldb) {
   Y.resize(Index(m), X.cols());
-  return nn_tiles(B, m, m, n, X, Y);
+  return nn_tiles(B, ldb ? ldb : m, m, n, X, Y);
 }
 
 double squared_norm(const float* B, size_t count) {

@@ -31,7 +31,8 @@ void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, 
 // For tests: transposed_product through its AVX2 kernel (the one CPUs without AVX-512 run for
 // l <= 96) on any CPU with AVX2 + FMA. Returns false where that kernel does not apply (Z is then
 // resized to n x l but not written).
-bool transposed_product_avx2(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::MatrixXf& Z, double* energy = nullptr);
+bool transposed_product_avx2(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::MatrixXf& Z, double* energy = nullptr,
+                             size_t ldb = 0);
 
 // Y = B X: Y m x l, X n x l, different memory. A MatrixXf Y is resized; a Ref must be m x l.
 // `ldb` as above (0: m).
@@ -39,7 +40,7 @@ void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen:
 void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::MatrixXf& Y, size_t ldb = 0);
 // For tests: thin_product through the AVX-512 tiles on any CPU with AVX-512 (Intel's take
 // OpenBLAS in thin_product). Returns false where the tiles do not apply (Y resized, not written).
-bool thin_product_tiles(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::MatrixXf& Y);
+bool thin_product_tiles(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::MatrixXf& Y, size_t ldb = 0);
 
 // ||B||_F^2 over `count` floats, summed in double (vectorized, parallel, fixed block order).
 double squared_norm(const float* B, size_t count);

@@ -439,6 +439,14 @@ TEST(Svd, ProductsWithALeadingDimensionGiveTheContiguousBits) {
     thin_product(sub, m, n, X, P1, ld);
     thin_product(flat.data(), m, n, X, P2);
     EXPECT_TRUE(P1 == P2) << "B X, l " << l;
+    // The kernels this CPU's products may not take: the AVX2 B^T Y, the AVX-512 B X tiles.
+    if (transposed_product_avx2(sub, m, n, Y, Z1, &e1, ld) && transposed_product_avx2(flat.data(), m, n, Y, Z2, &e2)) {
+      EXPECT_TRUE(Z1 == Z2) << "AVX2 B^T Y, l " << l;
+      EXPECT_EQ(e1, e2);
+    }
+    if (thin_product_tiles(sub, m, n, X, P1, ld) && thin_product_tiles(flat.data(), m, n, X, P2)) {
+      EXPECT_TRUE(P1 == P2) << "B X tiles, l " << l;
+    }
   }
   SvdOptions opt;
   const Sketch sketch = make_column_sketch(n, 12, opt);

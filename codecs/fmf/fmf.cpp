@@ -190,10 +190,10 @@ class FmfCodec final : public Codec {
         // channel's products on it. No channel matrix exists whole: the in-core copy of one
         // took a third of the input (peak 1.40 x the input at UBO2003 size) and 4 s of page
         // faults, and each channel's passes read it again.
-        // When the caller lets the encode consume the input (ctx.consumable), each part is
-        // converted once, in the first pass, into the Btf's own memory: the later passes read the
-        // channels there (UBO2003 size, rank 64: see docs/benchmarks.md). Not for target_error,
-        // whose search compares decodes against the input.
+        // When the caller lets the encode consume the input (ctx.consumable), each texel is
+        // converted once, in the first pass, in the Btf's own memory, and every pass reads the
+        // channels there (a fifth to a quarter of the encode at UBO2003 size, docs/benchmarks.md).
+        // Not for target_error, whose search compares decodes against the input.
         const MatrixChunks src(btf.data(), d.abrdf_size(), n, std::max<size_t>(1, (size_t(64) << 20) / d.abrdf_size()));
         float* const scratch = ctx.consumable == &btf && !dfmf_target ? ctx.consumable->data() : nullptr;
         Collective one;
