@@ -338,12 +338,7 @@ void column_sketch_product(const float* B, size_t m, size_t n, const Sketch& ske
   if (ldb == 0) ldb = m;
   if (!sketch.sparse()) {
     thin_product(B, m, n, sketch.G.middleRows(Index(first), Index(n)), Y, ldb);
-    if (energy) {
-      *energy = 0;
-      if (ldb == m) *energy = squared_norm(B, m * n);
-      else
-        for (size_t j = 0; j < n; ++j) *energy += squared_norm(B + j * ldb, m);  // column by column, in order
-    }
+    if (energy) *energy = squared_norm(B, m, n, ldb);
     return;
   }
   // By blocks of rows, so the sketch W = B S (m x s) is never whole: a reused rows x s buffer.

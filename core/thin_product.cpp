@@ -381,16 +381,7 @@ void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, 
   if (tn_avx2(B, ldb, m, n, Y, Z, energy)) return;
 #endif
   eigen_tn(B, ldb, m, n, Y, Z);
-  if (!energy) return;
-  if (ldb == m) {
-    *energy = squared_norm(B, m * n);
-    return;
-  }
-  std::vector<double> part(n);  // per column, then summed in order: independent of the thread count
-#pragma omp parallel for schedule(static)
-  for (int64_t j = 0; j < int64_t(n); ++j) part[size_t(j)] = block_squares(B + size_t(j) * ldb, m);
-  *energy = 0;
-  for (double v : part) *energy += v;
+  if (energy) *energy = squared_norm(B, m, n, ldb);
 }
 
 bool transposed_product_avx2(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::MatrixXf& Z, double* energy, size_t ldb) {
@@ -458,6 +449,16 @@ double squared_norm(const float* B, size_t count) {
   }
   double total = 0;
   for (double v : part) total += v;  // fixed order: independent of the thread count
+  return total;
+}
+
+double squared_norm(const float* B, size_t m, size_t n, size_t ldb) {
+  if (ldb == m) return squared_norm(B, m * n);
+  std::vector<double> part(n);
+#pragma omp parallel for schedule(static)
+  for (int64_t j = 0; j < int64_t(n); ++j) part[size_t(j)] = block_squares(B + size_t(j) * ldb, m);
+  double total = 0;
+  for (double v : part) total += v;
   return total;
 }
 

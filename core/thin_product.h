@@ -44,5 +44,8 @@ bool thin_product_tiles(const float* B, size_t m, size_t n, const ConstRefF& X, 
 
 // ||B||_F^2 over `count` floats, summed in double (vectorized, parallel, fixed block order).
 double squared_norm(const float* B, size_t count);
+// The same for B m x n with leading dimension ldb (ldb = m: the call above; else column by
+// column, the columns' sums added in order: independent of the thread count).
+double squared_norm(const float* B, size_t m, size_t n, size_t ldb);
 
 }  // namespace btfc

@@ -267,7 +267,7 @@ TEST(StreamingDfmf, InCoreOneStreamHoldsAtTheExtremes) {
   }
 }
 
-// Context::consumable: the in-core color=dfmf encode then converts each part once, into the
+// Context::consumable: the in-core color=dfmf encode then converts each texel once, in the
 // input's own memory, and gives the model it gives without (bit for bit). The consumed input
 // has changed (the path ran); target_error, whose search compares decodes with the input, and a
 // context naming another BTF leave the input as it was.

@@ -462,6 +462,15 @@ TEST(Svd, ProductsWithALeadingDimensionGiveTheContiguousBits) {
   column_sketch_product(flat.data(), m, n, sketch, y2, &e2);
   EXPECT_TRUE(y1 == y2);
   EXPECT_EQ(e1, e2);
+  // The dense start (a Gaussian Pi, B Pi through thin_product) and its energy column by column.
+  opt.sparse_sketch = false;
+  const Sketch dense = make_column_sketch(n, 12, opt);
+  ASSERT_FALSE(dense.sparse());
+  column_sketch_product(sub, m, n, dense, y1, &e1, 0, nullptr, ld);
+  column_sketch_product(flat.data(), m, n, dense, y2, &e2);
+  EXPECT_TRUE(y1 == y2);
+  EXPECT_NEAR(e1, e2, 1e-12 * e2);
+  EXPECT_NEAR(squared_norm(sub, m, n, ld), e2, 1e-12 * e2);
 }
 
 TEST(Svd, LargeGramEigenpairsEqualEigensSolver) {

@@ -102,6 +102,7 @@ Result<std::vector<SvdResult>> dfmf_streaming_svds(const ChunkSource& base, cons
     return invalid_argument("color=dfmf needs 3 channels: the BTF matrix has " + std::to_string(in_rows) + " rows");
   // Per chunk, set (not added) on the chunk's first part of every pass: each chunk counts once.
   std::vector<uint64_t> per_chunk(base.num_chunks(), 0);
+  auto count = [&](size_t c, size_t o, uint64_t n) { per_chunk[c] = (o == 0 ? 0 : per_chunk[c]) + n; };
   fmf::ChunkSplit split;
   split.channels = 3, split.rows = rows;
   split.split = [&](size_t c, size_t o, const float* B, size_t k, float* const* out) {
@@ -111,7 +112,7 @@ Result<std::vector<SvdResult>> dfmf_streaming_svds(const ChunkSource& base, cons
       const size_t at = size_t(t) * rows;
       n += dfmf_channels(B + size_t(t) * in_rows, rows, offset, out[0] + at, out[1] + at, out[2] + at);
     }
-    per_chunk[c] = (o == 0 ? 0 : per_chunk[c]) + n;
+    count(c, o, n);
   };
   if (in_place) {
     // Each texel's RGB column becomes its Y', U', V' columns, one after the other, through a
@@ -129,7 +130,7 @@ Result<std::vector<SvdResult>> dfmf_streaming_svds(const ChunkSource& base, cons
           std::memcpy(b, col.data(), in_rows * sizeof(float));
         }
       }
-      per_chunk[c] = (o == 0 ? 0 : per_chunk[c]) + n;
+      count(c, o, n);
     };
   }
   auto rs = fmf::streaming_svds(base, chunks, &split, {opt_y, opt_c, opt_c}, coll, stats, kept_blocks);
