@@ -11,7 +11,9 @@
 # Smoke mode (--runs) runs each target for N executions (libFuzzer -runs=N; without N, the
 # target's smoke=N from targets.txt, chosen so that all targets take about a minute here) over
 # its committed corpus and the golden seeds, with a scratch corpus in BUILD/smoke/<target> that
-# is emptied first: nothing is added to tests/fuzz/corpus/ or to BUILD/corpus/.
+# is emptied first: nothing is added to tests/fuzz/corpus/ or to BUILD/corpus/. The smoke's
+# mutations come from a fixed seed (libFuzzer -seed=1, or $BTFC_FUZZ_SEED), so that it is the
+# same on every machine; timed runs draw a new seed each time.
 # BUILD is $BTFC_FUZZ_BUILD_DIR (default build-fuzz). A missing BUILD is configured for fuzzing;
 # an existing one is used as it is (never reconfigured; it must have -DBTFC_FUZZ=ON, e.g. a
 # sanitizer build with tests), and the targets are built there if needed.
@@ -74,7 +76,7 @@ if ! grep -q '^BTFC_FUZZ:BOOL=ON' "$B/CMakeCache.txt"; then
 fi
 nice -n 10 cmake --build "$B" -j 2 --target "${TARGETS[@]}"
 
-export ASAN_OPTIONS=detect_leaks=1:allocator_may_return_null=1
+export ASAN_OPTIONS=detect_leaks=1:allocator_may_return_null=1:suppressions=$PWD/tests/asan.supp
 export LSAN_OPTIONS=suppressions=$PWD/tests/lsan.supp
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 export OMP_NUM_THREADS=1 BTFC_FORCE_CPU=1
@@ -106,7 +108,9 @@ for t in "${TARGETS[@]}"; do
   [ -n "$RUNS" ] && log="$B/smoke-$t.log"
   rc=0
   if [ -n "$RUNS" ]; then
-    limit=(-runs="$(smoke_runs "$t")" -max_total_time=600)
+    # A fixed seed: the smoke is a check (CI runs it), and the same mutations on every machine
+    # make a finding there replay here with the same command. BTFC_FUZZ_SEED picks others.
+    limit=(-runs="$(smoke_runs "$t")" -max_total_time=600 -seed="${BTFC_FUZZ_SEED:-1}")
   else
     limit=(-max_total_time="$SECONDS_PER")
   fi
@@ -126,8 +130,15 @@ for t in "${TARGETS[@]}"; do
   if [ "$found" != 0 ]; then
     status=1
     # The target's own message and the sanitizer's summary (|| true: a finding without them must
-    # not end the script under pipefail before the other targets ran).
-    grep -E 'ERROR: |SUMMARY: |runtime error|^fuzz_' "$log" | head -5 | sed 's/^/    /' || true
+    # not end the script under pipefail before the other targets ran). -a: a message may quote the
+    # input's bytes, and grep >= 3.5 then says only "binary file matches", on stderr.
+    grep -aE 'ERROR: |SUMMARY: |runtime error|^fuzz_' "$log" | head -5 | cut -c1-400 | sed 's/^/    /' || true
+    # The input itself, so that a finding on another machine (CI) can be replayed from its log:
+    # base64 -d >crash && BUILD/tests/fuzz/<target> crash.
+    for a in $(find "$art" -type f \( -name 'crash-*' -o -name 'leak-*' -o -name 'oom-*' -o -name 'timeout-*' \) -size -16k | head -2); do
+      echo "    $(basename "$a") (base64):"
+      base64 -w 100 "$a" | sed 's/^/      /'
+    done
   fi
 done
 exit $status

@@ -76,7 +76,7 @@ rm -rf "$LOGS" && mkdir -p "$LOGS"
 # ("LeakSanitizer has encountered a fatal error", at random, more often next to PoCL's and
 # OpenMP's threads). The cost: pointers held only in another library's dynamic TLS are not
 # roots, which no btfc code relies on.
-export ASAN_OPTIONS=detect_leaks=1:exitcode=86:log_path=$LOGS/asan:check_initialization_order=1:strict_string_checks=1:intercept_tls_get_addr=0
+export ASAN_OPTIONS=detect_leaks=1:exitcode=86:log_path=$LOGS/asan:check_initialization_order=1:strict_string_checks=1:intercept_tls_get_addr=0:suppressions=$ROOT/tests/asan.supp
 export LSAN_OPTIONS=suppressions=$ROOT/tests/lsan.supp:print_suppressions=0
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1:exitcode=86:log_path=$LOGS/ubsan
 export BTFC_SANITIZER=1
