@@ -12,6 +12,8 @@
 // (--texels N columns of 19683 rows) when no file is given.
 //
 //   bench_products [--load FILE] [--rows 19683] [--texels 65536] [--widths "12 24 32 48 64 96"]
+//                  [--ld LD]   (B is the first --rows rows of each LD-row column, as color=dfmf's
+//                  in-place channels are: 6561 of 19683; --load files then hold LD-row columns)
 #include <Eigen/Dense>
 #include <cstdio>
 #include <cstdlib>
@@ -36,33 +38,35 @@ using btfc::bench::best_of;
 
 int main(int argc, char** argv) {
   std::string load, widths = "12 24 32 48 64 96";
-  size_t m = 19683, n = 65536;
+  size_t m = 19683, n = 65536, ld = 0;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string a = argv[i];
     if (a == "--load") load = argv[i + 1];
     else if (a == "--rows") m = size_t(std::atoll(argv[i + 1]));
     else if (a == "--texels") n = size_t(std::atoll(argv[i + 1]));
     else if (a == "--widths") widths = argv[i + 1];
+    else if (a == "--ld") ld = size_t(std::atoll(argv[i + 1]));
     else {
       std::fprintf(stderr, "bench_products: unknown option %s\n", a.c_str());
       return 2;
     }
   }
+  if (ld < m) ld = m;
   if (!load.empty()) {
     const int fd = open(load.c_str(), O_RDONLY);
     const off_t size = fd >= 0 ? lseek(fd, 0, SEEK_END) : -1;
-    if (fd < 0 || size <= 0 || size_t(size) % (4 * m) != 0) {
-      std::fprintf(stderr, "bench_products: %s: cannot open, or not a whole number of %zu-row float32 columns\n", load.c_str(), m);
+    if (fd < 0 || size <= 0 || size_t(size) % (4 * ld) != 0) {
+      std::fprintf(stderr, "bench_products: %s: cannot open, or not a whole number of %zu-row float32 columns\n", load.c_str(), ld);
       return 1;
     }
-    n = size_t(size) / (4 * m);
+    n = size_t(size) / (4 * ld);
     close(fd);
   }
-  PageBuffer<float> buf(m * n);
+  PageBuffer<float> buf(ld * n);
   if (!load.empty()) {
     const int fd = open(load.c_str(), O_RDONLY);
     char* p = reinterpret_cast<char*>(buf.data());
-    for (size_t off = 0, total = m * n * 4; off < total;) {
+    for (size_t off = 0, total = ld * n * 4; off < total;) {
       const ssize_t r = read(fd, p + off, std::min<size_t>(total - off, size_t(1) << 26));
       if (r <= 0) {
         std::fprintf(stderr, "bench_products: %s: read failed\n", load.c_str());
@@ -74,12 +78,13 @@ int main(int argc, char** argv) {
   } else {
     std::mt19937 rng(1);
     std::uniform_real_distribution<float> u(0.f, 1.f);
-    for (size_t i = 0; i < m * n; ++i) buf.data()[i] = u(rng);
+    for (size_t i = 0; i < ld * n; ++i) buf.data()[i] = u(rng);
   }
-  const Eigen::Map<const Eigen::MatrixXf> B(buf.data(), Eigen::Index(m), Eigen::Index(n));
-  std::printf("B: %zu x %zu float32 (%.2f GB)%s, loops: %s\n", m, n, double(m * n) * 4 / 1e9, load.empty() ? " random" : "",
-              cpu_dispatch_level());
-  {  // the sparse sign sketches of the first pass (s = 256 buckets, two per row or column)
+  const Eigen::Map<const Eigen::MatrixXf, 0, Eigen::OuterStride<>> B(buf.data(), Eigen::Index(m), Eigen::Index(n),
+                                                                     Eigen::OuterStride<>(Eigen::Index(ld)));
+  std::printf("B: %zu x %zu float32 (%.2f GB, leading dimension %zu)%s, loops: %s\n", m, n, double(m * n) * 4 / 1e9, ld,
+              load.empty() ? " random" : "", cpu_dispatch_level());
+  if (ld == m) {  // the sparse sign sketches of the first pass (s = 256 buckets, two per row or column)
     const size_t sk = 256, chunk = 4096;
     const SparseSign rows_s = make_sparse_sign(m, sk, 1, 2), cols_s = make_sparse_sign(n, sk, 1, 2);
     PageBuffer<float> wr(sk * chunk), wc(m * sk);
@@ -102,15 +107,17 @@ int main(int argc, char** argv) {
     const double t_first = best_of(3, [&] { column_sketch_product(buf.data(), m, n, first, Y, &e, 0, &scratch); });
     std::printf("first pass Y = B S G (l = 40, s = %zu, %s, with ||B||^2): %.3f s\n", first.S.s, first.sparse() ? "sparse" : "dense", t_first);
   }
-  std::printf("%4s %8s | %8s %6s %8s %6s | %8s %6s %8s %6s\n", "l", "read s", "B X s", "GF/s", "OpenBLAS", "GF/s", "B^T Q s", "GF/s",
-              "OpenBLAS", "GF/s");
+  std::printf("%4s %8s | %8s %6s %8s %6s %8s %6s | %8s %6s %8s %6s\n", "l", "read s", "B X s", "GF/s", "OpenBLAS", "GF/s", "tiles",
+              "GF/s", "B^T Q s", "GF/s", "OpenBLAS", "GF/s");
   std::istringstream ws(widths);
   for (int l; ws >> l;) {
     Eigen::MatrixXf X = Eigen::MatrixXf::Random(Eigen::Index(n), l), Q = Eigen::MatrixXf::Random(Eigen::Index(m), l);
     Eigen::MatrixXf Y(Eigen::Index(m), l), Z(Eigen::Index(n), l);
     double sink = 0;
-    const double t_read = best_of(3, [&] { sink += squared_norm(buf.data(), m * n); });
-    const double t_nn = best_of(3, [&] { thin_product(buf.data(), m, n, X, Y); });
+    const double t_read = best_of(3, [&] { sink += squared_norm(buf.data(), m, n, ld); });
+    const double t_nn = best_of(3, [&] { thin_product(buf.data(), m, n, X, Y, ld); });
+    Eigen::MatrixXf Yt;
+    const double t_tiles = best_of(3, [&] { thin_product_tiles(buf.data(), m, n, X, Yt, ld); });
     const int parts = 2 * omp_get_max_threads();
     const double t_nn_blas = best_of(3, [&] {
       SingleThreadedBlas one;
@@ -120,7 +127,7 @@ int main(int argc, char** argv) {
         Y.middleRows(r0, r1 - r0).noalias() = B.middleRows(r0, r1 - r0) * X;
       }
     });
-    const double t_tn = best_of(3, [&] { transposed_product(buf.data(), m, n, Q, Z); });
+    const double t_tn = best_of(3, [&] { transposed_product(buf.data(), m, n, Q, Z, nullptr, ld); });
     const double t_tn_blas = best_of(3, [&] {
       SingleThreadedBlas one;
 #pragma omp parallel for schedule(dynamic, 1)
@@ -130,8 +137,8 @@ int main(int argc, char** argv) {
       }
     });
     const double gf = 2.0 * double(m) * double(n) * double(l) / 1e9;
-    std::printf("%4d %8.3f | %8.3f %6.0f %8.3f %6.0f | %8.3f %6.0f %8.3f %6.0f%s\n", l, t_read, t_nn, gf / t_nn, t_nn_blas, gf / t_nn_blas,
-                t_tn, gf / t_tn, t_tn_blas, gf / t_tn_blas, sink < 0 ? " " : "");
+    std::printf("%4d %8.3f | %8.3f %6.0f %8.3f %6.0f %8.3f %6.0f | %8.3f %6.0f %8.3f %6.0f%s\n", l, t_read, t_nn, gf / t_nn, t_nn_blas,
+                gf / t_nn_blas, t_tiles, gf / t_tiles, t_tn, gf / t_tn, t_tn_blas, gf / t_tn_blas, sink < 0 ? " " : "");
   }
   return 0;
 }

@@ -234,12 +234,20 @@ bool sparse_sign_product_avx2(const float* B, size_t n, const SparseSign& S, flo
 namespace {
 // A parallel task of sparse_sign_columns' bucket order: up to 2048 rows of B and 16 buckets; a
 // bucket's sum (8 KB) stays in L1 while its texels' pieces of B (8 KB each) come from memory. In
-// texel order a task is a chunk of 2048 rows: its s sums (2 MB at s = 256) sit in L2 / L3 while
-// B's pieces come in storage order at a constant stride (0.26 s against 0.35 s for 19683 x 65536
-// at s = 256, one layer, on 2 Zen 3 cores, bench_products; the bucket order's jumps between a
-// bucket's texels are what cost). Texel order needs two chunks or more to keep two cores busy,
-// so the bucket order stays for calls of fewer rows (small matrices, a block's last rows).
+// texel order a task is a chunk of rows: its s sums sit in L2 / L3 while B's pieces come in
+// storage order at a constant stride (0.26 s against 0.35 s for 19683 x 65536 at s = 256, one
+// layer, on 2 Zen 3 cores, bench_products; the bucket order's jumps between a bucket's texels are
+// what cost). Texel order needs two chunks or more to keep two cores busy, so the bucket order
+// stays for calls of fewer than 4096 rows (small matrices, a block's last rows).
 constexpr size_t k_column_rows = 2048, k_column_buckets = 16;
+// Texel order's chunks: a multiple of 4 (even work on 1, 2 or 4 threads), of equal size (a
+// multiple of 16 rows), at most 8192 rows each. Chunks of 2048 rows and a short last one left
+// one of 2 threads idle for a third of color=dfmf's sketches (6561 rows: 2048 x 3 + 417), and
+// longer pieces of B per texel beat sums nearer the core on a 2-core Xeon (Sapphire Rapids, 2 MB
+// L2): one layer over the UBO2003-size matrix 0.373-0.379 s -> 0.314-0.321 s, the dfmf encode's
+// three sketches 0.43 -> 0.34 s (docs/benchmarks.md, 2026-12-05). The chunking is the same on
+// any thread count, so ||B||^2, summed by chunks, has the same bits too.
+constexpr size_t k_texel_chunk_max = 8192;
 
 // acc[0, count) += v or -= v; with `energy`, the squares of v summed into e (in double) in the
 // same loop (one read of v: the texel order's pieces come from memory).
@@ -291,11 +299,13 @@ void sparse_sign_columns(const float* B, size_t ldb, size_t m, size_t n, const S
     std::vector<uint32_t> entry(S.layers * n);
     for (size_t j = 0; j < n; ++j)
       for (size_t t = 0; t < S.layers; ++t) entry[j * S.layers + t] = bucket[t * n + j] | flags(j, t);
-    const int64_t chunks = int64_t((m + k_column_rows - 1) / k_column_rows);
+    const size_t quads = (m + 4 * k_texel_chunk_max - 1) / (4 * k_texel_chunk_max);
+    const size_t per = ((m + 4 * quads - 1) / (4 * quads) + 15) / 16 * 16;  // rows per chunk
+    const int64_t chunks = int64_t((m + per - 1) / per);
     std::vector<double> part(size_t(chunks), 0.0);
 #pragma omp parallel for schedule(static, 1)
     for (int64_t chunk = 0; chunk < chunks; ++chunk) {
-      const size_t i0 = size_t(chunk) * k_column_rows, rows = std::min(k_column_rows, m - i0);
+      const size_t i0 = size_t(chunk) * per, rows = std::min(per, m - i0);
       if (!accumulate)
         for (size_t b = 0; b < S.s; ++b) std::fill_n(W + b * m + i0, rows, 0.0f);
       double e = 0;
