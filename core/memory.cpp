@@ -37,6 +37,15 @@ void* page_alloc(size_t bytes) {
   return p;
 }
 
+void* page_alloc_touched(size_t bytes) {
+  char* const p = static_cast<char*>(page_alloc(bytes));
+  constexpr size_t k_page = 4096;
+  const long long pages = (long long)((bytes + k_page - 1) / k_page);
+#pragma omp parallel for schedule(static) if (pages >= 1024)
+  for (long long i = 0; i < pages; ++i) p[size_t(i) * k_page] = 0;
+  return p;
+}
+
 void PageFree::operator()(void* p) const { std::free(p); }
 
 uint64_t mem_available_bytes() {

@@ -15,6 +15,7 @@
 #include <cstring>
 #include <list>
 #include <mutex>
+#include <optional>
 #include <random>
 #include <vector>
 
@@ -343,16 +344,25 @@ void column_sketch_product(const float* B, size_t m, size_t n, const Sketch& ske
   }
   // By blocks of rows, so the sketch W = B S (m x s) is never whole: a reused rows x s buffer.
   const size_t s = sketch.S.s, rows = sketch_rows(m, sketch.S.m, sketch.G.cols(), s);
-  std::vector<float> own;
-  std::vector<float>& w = scratch ? *scratch : own;
-  w.resize(rows * s);
+  // Without the caller's scratch, huge pages left unwritten: sparse_sign_columns zeroes each
+  // part of W on the thread that sums into it (a vector's zero fill was 8 MB of page faults on
+  // the main thread at UBO2003 size).
+  std::optional<PageBuffer<float>> own;
+  float* w = nullptr;
+  if (scratch) {
+    scratch->resize(rows * s);
+    w = scratch->data();
+  } else {
+    own.emplace(rows * s);
+    w = own->data();
+  }
   if (energy) *energy = 0;
   for (size_t i0 = 0; i0 < m; i0 += rows) {
     const size_t h = std::min(rows, m - i0);
     double e = 0;
-    sparse_sign_columns(B + i0, ldb, h, n, sketch.S, w.data(), energy ? &e : nullptr, first);
+    sparse_sign_columns(B + i0, ldb, h, n, sketch.S, w, energy ? &e : nullptr, first);
     if (energy) *energy += e;  // in block order: independent of the thread count
-    sketch_times_gaussian(w.data(), h, sketch, Y.middleRows(Index(i0), Index(h)));
+    sketch_times_gaussian(w, h, sketch, Y.middleRows(Index(i0), Index(h)));
   }
 }
 
@@ -491,7 +501,7 @@ class PageMatrix {
   using Mat = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>;
 
  public:
-  PageMatrix(Index rows, Index cols) : m_buf(size_t(rows) * size_t(cols)), map(m_buf.data(), rows, cols) {}
+  PageMatrix(Index rows, Index cols) : m_buf(size_t(rows) * size_t(cols), typename PageBuffer<Scalar>::Touched{}), map(m_buf.data(), rows, cols) {}
   Eigen::Map<Mat>& operator*() { return map; }
 
  private:

@@ -300,7 +300,7 @@ class Staging {
       std::unique_lock<std::mutex> lock(s_mutex, std::try_to_lock);
       if (lock.owns_lock() && s_count >= count) m_p = std::move(s_p), m_count = s_count, s_count = 0;
     }
-    if (!m_p) m_p.reset(static_cast<float*>(page_alloc(count * sizeof(float)))), m_count = count;
+    if (!m_p) m_p.reset(static_cast<float*>(page_alloc_touched(count * sizeof(float)))), m_count = count;
   }
   ~Staging() {
     if (m_count * sizeof(float) > (size_t(64) << 20)) return;

@@ -4,12 +4,14 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <cstdint>
 #include <cstdlib>
 #include <string>
 
 #include "codecs/codec.h"
 #include "core/container.h"
 #include "core/limits.h"
+#include "core/memory.h"
 #include "core/synth.h"
 
 using namespace btfc;
@@ -125,4 +127,35 @@ TEST(Limits, DecodeAndLoadFailOverTheLimit) {
   EXPECT_TRUE(load_raw_btf(raw.value()).ok());
   std::remove(mp.c_str());
   std::remove(rp.c_str());
+}
+
+// Scratch memory (core/memory.h): below 2 MiB plain malloc, above it 2 MiB-aligned; touched or
+// not, every byte is the caller's to write and read back, on the main thread and inside a
+// parallel region (where the touch is serial).
+TEST(Memory, PageBuffersHoldWhatIsWrittenTouchedOrNot) {
+  for (size_t count : {size_t(1), size_t(1000), size_t(3) << 20}) {
+    for (int touched = 0; touched < 2; ++touched) {
+      auto check = [&] {
+        float* p = touched ? static_cast<float*>(page_alloc_touched(count * sizeof(float))) : static_cast<float*>(page_alloc(count * sizeof(float)));
+        ASSERT_NE(p, nullptr);
+        if (count * sizeof(float) >= (size_t(2) << 20)) {
+          EXPECT_EQ(reinterpret_cast<uintptr_t>(p) % (size_t(2) << 20), 0u);
+        }
+        for (size_t i = 0; i < count; ++i) p[i] = float(i % 977);
+        size_t bad = 0;
+        for (size_t i = 0; i < count; ++i) bad += p[i] != float(i % 977);
+        EXPECT_EQ(bad, 0u) << count << " " << touched;
+        PageFree{}(p);
+      };
+      check();
+#pragma omp parallel num_threads(2)
+      {
+#pragma omp single
+        check();
+      }
+    }
+  }
+  PageBuffer<double> b(size_t(1) << 20, PageBuffer<double>::Touched{});
+  b.data()[0] = 1.0, b.data()[(size_t(1) << 20) - 1] = 2.0;
+  EXPECT_EQ(b.data()[0] + b.data()[(size_t(1) << 20) - 1], 3.0);
 }
