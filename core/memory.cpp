@@ -37,12 +37,17 @@ void* page_alloc(size_t bytes) {
   return p;
 }
 
-void* page_alloc_touched(size_t bytes) {
-  char* const p = static_cast<char*>(page_alloc(bytes));
+void page_touch(void* p, size_t bytes) {
+  char* const c = static_cast<char*>(p);
   constexpr size_t k_page = 4096;
   const long long pages = (long long)((bytes + k_page - 1) / k_page);
 #pragma omp parallel for schedule(static) if (pages >= 1024)
-  for (long long i = 0; i < pages; ++i) p[size_t(i) * k_page] = 0;
+  for (long long i = 0; i < pages; ++i) c[size_t(i) * k_page] = 0;
+}
+
+void* page_alloc_touched(size_t bytes) {
+  void* const p = page_alloc(bytes);
+  page_touch(p, bytes);
   return p;
 }
 

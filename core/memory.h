@@ -33,10 +33,13 @@ std::string format_bytes(uint64_t bytes);
 // malloc (a huge page would be zeroed whole for a few KB). Not zeroed; throws
 // std::bad_alloc like a vector. Btf data has its own (FloatBuffer, core/btf.h, zeroed in parallel).
 void* page_alloc(size_t bytes);
-// page_alloc, then every page touched (written) by the OpenMP threads, each its share: the
-// kernel zeroes a fresh page on its first write, in the writing thread, so a buffer that the
-// main thread would fill first (the SVD's basis, the products' staging) faults on all cores
-// instead of one. Serial inside a parallel region. The contents stay unspecified.
+// Every page of p[0, bytes) touched (written) by the OpenMP threads, each its share: the kernel
+// zeroes a fresh page on its first write, in the writing thread, so a buffer that the main
+// thread would fill first (the SVD's basis, the products' staging) faults on all cores instead
+// of one. Serial inside a parallel region. The contents stay unspecified. Only what will be
+// used: a touched page is resident whether it is used or not.
+void page_touch(void* p, size_t bytes);
+// page_alloc, then page_touch of all of it.
 void* page_alloc_touched(size_t bytes);
 struct PageFree {
   void operator()(void* p) const;
@@ -45,8 +48,6 @@ template <class T>
 class PageBuffer {
  public:
   explicit PageBuffer(size_t count) : m_p(static_cast<T*>(page_alloc(count * sizeof(T)))) {}
-  struct Touched {};
-  PageBuffer(size_t count, Touched) : m_p(static_cast<T*>(page_alloc_touched(count * sizeof(T)))) {}
   T* data() { return m_p.get(); }
 
  private:

@@ -501,7 +501,7 @@ class PageMatrix {
   using Mat = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>;
 
  public:
-  PageMatrix(Index rows, Index cols) : m_buf(size_t(rows) * size_t(cols), typename PageBuffer<Scalar>::Touched{}), map(m_buf.data(), rows, cols) {}
+  PageMatrix(Index rows, Index cols) : m_buf(size_t(rows) * size_t(cols)), map(m_buf.data(), rows, cols) {}
   Eigen::Map<Mat>& operator*() { return map; }
 
  private:
@@ -531,6 +531,11 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
   const Index width = Index(max_blocks) * l;
   PageMatrix<double> q_buf(m, width);
   PageMatrix<float> wt_buf(n, width);
+  {  // the first two blocks, which every run fills, faulted on all threads (core/memory.h)
+    const size_t used = size_t(std::min(width, 2 * l));
+    page_touch((*q_buf).data(), size_t(m) * used * sizeof(double));
+    page_touch((*wt_buf).data(), size_t(n) * used * sizeof(float));
+  }
   auto& Q = *q_buf;    // the orthonormal Krylov basis, l columns per block
   auto& Wt = *wt_buf;  // B^T Q, block by block
   MatrixXd G(width, width);  // W W^T = Wt^T Wt in double, grown block by block
