@@ -412,6 +412,67 @@ TEST(MlvqStorage, GpuTensorsDescribeTheHierarchy) {
   EXPECT_TRUE(idx && l1 && rgb2);
 }
 
+// ---- the codebook search's SSIM scan -----------------------------------------------------------
+
+// ssim_margins (the vectorized scan, this CPU's clone) against the one-pair formula, bit for bit,
+// for real vectors' moments and the corner cases: a zero entry (see = 0), a zero candidate (peak
+// 0: the formula's early 1), anti-correlated vectors (a negative dot: scale 0), each part alone
+// and both, over runs that are not a multiple of any vector width and start mid-codebook.
+TEST(MlvqSearch, ScanGivesTheFormulasBitsForEveryPair) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> u(0, 1);
+  const int nl = 9, nc = 18;
+  auto moments = [&](std::vector<float>& v, int kind) {  // kind 0: random, 1: zero, 2: negative
+    for (float& x : v) x = kind == 1 ? 0.f : kind == 2 ? -u(rng) : u(rng) * u(rng) * 4;
+  };
+  const size_t K = 203;
+  std::vector<std::vector<float>> el(K, std::vector<float>(nl)), ec(K, std::vector<float>(nc));
+  for (size_t j = 0; j < K; ++j) moments(el[j], j % 17 == 3 ? 1 : 0), moments(ec[j], j % 13 == 5 ? 1 : 0);
+  auto sums = [](const std::vector<float>& a, const std::vector<float>& b) {
+    double s = 0;
+    for (size_t i = 0; i < a.size(); ++i) s += double(a[i]) * b[i];
+    return s;
+  };
+  auto sum = [](const std::vector<float>& a) {
+    double s = 0;
+    for (float x : a) s += x;
+    return s;
+  };
+  for (int part = 0; part < 3; ++part) {  // 0: luminance only, 1: chromaticity only, 2: both
+    const double n_lum = part != 1 ? nl : 0, n_chroma = part != 0 ? nc : 0;
+    EntryTerms terms;
+    for (size_t j = 0; j < K; ++j) terms.add(n_lum, n_chroma, sum(el[j]), sums(el[j], el[j]), sum(ec[j]), sums(ec[j], ec[j]));
+    for (int c = 0; c < 12; ++c) {
+      std::vector<float> xl(nl), xc(nc);
+      moments(xl, c % 4 == 1 ? 1 : c % 4 == 2 ? 2 : 0), moments(xc, c % 3 == 1 ? 1 : 0);
+      ScanCandidate x;
+      x.n_lum = n_lum, x.sx = sum(xl), x.sxx = sums(xl, xl), x.L = 0;
+      for (float v : xl) x.L = std::max(x.L, double(v));
+      x.n_chroma = n_chroma, x.sxc = sum(xc), x.sxxc = sums(xc, xc);
+      x.thr_l = 0.9, x.thr_c = 0.7;
+      const size_t j0 = size_t(c) * 7 % 40, k = K - j0;
+      std::vector<float> gl(k), gc(k);
+      for (size_t j = 0; j < k; ++j) gl[j] = float(sums(xl, el[j0 + j])), gc[j] = float(sums(xc, ec[j0 + j]));
+      std::vector<double> margin(k), scale(k);
+      ssim_margins(x, terms, j0, k, gl.data(), gc.data(), margin.data(), scale.data());
+      int scaled_zero = 0;
+      for (size_t j = 0; j < k; ++j) {
+        const size_t e = j0 + j;
+        double want = 2, sc = 1;
+        if (n_lum > 0) want = ssim_from_moments(n_lum, x.sx, x.sxx, sum(el[e]), sums(el[e], el[e]), gl[j], x.L, true, &sc) - x.thr_l;
+        if (n_chroma > 0)
+          want = std::min(want, ssim_from_moments(n_chroma, x.sxc, x.sxxc, sum(ec[e]), sums(ec[e], ec[e]), gc[j], 1.0, false, nullptr) - x.thr_c);
+        ASSERT_EQ(std::memcmp(&margin[j], &want, sizeof want), 0) << "part " << part << " candidate " << c << " entry " << e << ": " << margin[j] << " vs " << want;
+        ASSERT_EQ(std::memcmp(&scale[j], &sc, sizeof sc), 0) << "part " << part << " candidate " << c << " entry " << e;
+        scaled_zero += n_lum > 0 && sc == 0;
+      }
+      if (n_lum > 0 && c % 4 == 2) {
+        EXPECT_GT(scaled_zero, 0);  // the negative candidate's scales clamp at 0
+      }
+    }
+  }
+}
+
 // ---- OpenCL kernels vs C++ references --------------------------------------------------------
 
 TEST(MlvqOpenCL, SsimSearchKernelMatchesReference) {

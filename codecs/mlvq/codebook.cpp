@@ -19,10 +19,13 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <memory>
+#include <omp.h>
 #include <unordered_map>
 
 #include "codecs/mlvq/mlvq_cl.h"
 #include "codecs/mlvq/mlvq_internal.h"
+#include "core/blas_env.h"
 
 namespace btfc::mlvq {
 
@@ -32,20 +35,6 @@ float store_value(float v, int value_bits) {
   if (value_bits <= 0) return float(Imath::half(v));
   const float q = std::ldexp(1.f, value_bits);
   return std::round(v * q) / q;
-}
-
-double ssim_from_moments(double n, double sx, double sxx, double se, double see, double sxe, double L, bool scaled,
-                         double* scale) {
-  double s = 1;
-  if (scaled) s = see > 0 ? std::max(0.0, sxe / see) : 0.0;
-  if (scale) *scale = s;
-  const double mx = sx / n, me = se / n;
-  const double my = s * me;
-  const double vx = std::max(0.0, sxx / n - mx * mx), vy = std::max(0.0, s * s * (see / n - me * me));
-  const double cxy = s * (sxe / n - mx * me);
-  const double c1 = (0.01 * L) * (0.01 * L), c2 = (0.03 * L) * (0.03 * L);
-  if (c1 == 0 && c2 == 0) return 1;  // both vectors zero
-  return ((2 * mx * my + c1) * (2 * cxy + c2)) / ((mx * mx + my * my + c1) * (vx + vy + c2));
 }
 
 ScaleCodes quantize_scales(std::vector<float>& v, int bits) {
@@ -98,6 +87,33 @@ struct PassOut {
   std::vector<Origin> created;
 };
 
+// A batch's product matrix in memory that only grows (doubling): a product per batch into a
+// fresh allocation faulted its pages in every time (9 % of an encode of the textile, perf).
+struct Scratch {
+  std::unique_ptr<float[]> p;
+  size_t cap = 0;
+  Eigen::Map<MatrixXfR> view(size_t rows, size_t cols) {
+    if (rows * cols > cap) cap = std::max(rows * cols, 2 * cap), p.reset(new float[cap]);
+    return {p.get(), Eigen::Index(rows), Eigen::Index(cols)};
+  }
+};
+
+// Z = X E^T (E: k x d row-major) by row blocks on the OpenMP threads, each block one BLAS call on
+// its caller's thread (the pass holds SingleThreadedBlas): OpenBLAS's own pool, woken by each
+// batch's product, spun (sched_yield) against the scan's OpenMP threads for a fifth of an
+// encode (perf, the textile). Blocks of at least 32 rows, where Eigen hands every block to BLAS
+// as it does the whole product.
+void product_rows(Eigen::Map<MatrixXfR> Z, const MatrixXfR& X, const float* E, size_t k) {
+  const Eigen::Index rows = Z.rows(), d = X.cols();
+  const int T = int(std::clamp<Eigen::Index>(rows / 32, 1, omp_get_max_threads()));
+  const Eigen::Map<const MatrixXfR> Em(E, Eigen::Index(k), d);
+#pragma omp parallel for schedule(static) num_threads(T)
+  for (int t = 0; t < T; ++t) {
+    const Eigen::Index r0 = rows * t / T, r1 = rows * (t + 1) / T;
+    Z.middleRows(r0, r1 - r0).noalias() = X.middleRows(r0, r1 - r0) * Em.transpose();
+  }
+}
+
 // One leader pass of part `part` at `level` over `cand` (see the file comment).
 // Similarity of a candidate to an entry is its margin over the thresholds: min(lum SSIM - thr_l,
 // chroma SSIM - thr_c) over the parts present; an entry is reused when the best margin is >= 0.
@@ -111,12 +127,23 @@ PassOut leader_pass(const Btf& btf, const ResamplePlan& plan, int level, Part pa
   out.scale.assign(cand.size(), part == k_chroma ? 1.f : 0.f);
   std::vector<float> El, Ec;           // prototypes, K x dl and K x dc
   std::vector<double> em;              // per entry: se, see (lum), sec, seec (chroma)
+  EntryTerms terms;                    // the same entries' terms for the CPU scan (ssim_scan.cpp)
   size_t K = 0;
-  MatrixXfR Xl, Xc, Gl, Gc;
+  MatrixXfR Xl, Xc;
+  Scratch gl_buf, gc_buf, hl_buf, hc_buf;  // the batches' products (Gl, Gc, Hl, Hc below)
   std::vector<double> xm;              // per candidate: sx, sxx, L, sxc, sxxc
   std::vector<int> best;
   std::vector<double> best_sim, best_scale;
   const size_t bmax = std::clamp<size_t>((size_t(4) << 20) / std::max<size_t>(d, 1), 64, 4096);
+  const SingleThreadedBlas one_blas_thread;  // product_rows
+  // A candidate's side of the scan from its sums (xm: sx, sxx, peak, sxc, sxxc).
+  auto scan_candidate = [&](const double* m) {
+    ScanCandidate x;
+    x.n_lum = dl, x.sx = m[0], x.sxx = m[1], x.L = m[2];
+    x.n_chroma = dc, x.sxc = m[3], x.sxxc = m[4];
+    x.thr_l = thr_l, x.thr_c = thr_c;
+    return x;
+  };
   size_t b0 = 0;
   while (b0 < cand.size()) {
     size_t B = std::min(bmax, cand.size() - b0);
@@ -154,22 +181,28 @@ PassOut leader_pass(const Btf& btf, const ResamplePlan& plan, int level, Part pa
       }
     }
     if (K0 > 0 && !cl_search) {
-      if (dl) Gl.noalias() = Xl * Eigen::Map<const MatrixXfR>(El.data(), Eigen::Index(K0), dl).transpose();
-      if (dc) Gc.noalias() = Xc * Eigen::Map<const MatrixXfR>(Ec.data(), Eigen::Index(K0), dc).transpose();
-#pragma omp parallel for schedule(dynamic, 16)
-      for (size_t i = 0; i < B; ++i) {
-        const double* m = &xm[5 * i];
-        double bs = -3, bsc = 1;
-        int bj = -1;
-        for (size_t j = 0; j < K0; ++j) {
-          const double* e = &em[4 * j];
-          double s = 2, sc = 1;
-          if (dl) s = ssim_from_moments(dl, m[0], m[1], e[0], e[1], Gl(Eigen::Index(i), Eigen::Index(j)), m[2], true, &sc) - thr_l;
-          if (dc && s > bs)
-            s = std::min(s, ssim_from_moments(dc, m[3], m[4], e[2], e[3], Gc(Eigen::Index(i), Eigen::Index(j)), 1.0, false, nullptr) - thr_c);
-          if (s > bs) bs = s, bj = int(j), bsc = sc;
+      Eigen::Map<MatrixXfR> Gl = gl_buf.view(B, dl ? K0 : 0), Gc = gc_buf.view(B, dc ? K0 : 0);
+      if (dl) product_rows(Gl, Xl, El.data(), K0);
+      if (dc) product_rows(Gc, Xc, Ec.data(), K0);
+#pragma omp parallel
+      {
+        // Margins of a run of entries at a time (in L1), then the first best of the run.
+        constexpr size_t R = 512;
+        double margin[R], scale[R];
+#pragma omp for schedule(dynamic, 16)
+        for (size_t i = 0; i < B; ++i) {
+          const ScanCandidate x = scan_candidate(&xm[5 * i]);
+          double bs = -3, bsc = 1;
+          int bj = -1;
+          for (size_t j0 = 0; j0 < K0; j0 += R) {
+            const size_t k = std::min(R, K0 - j0);
+            ssim_margins(x, terms, j0, k, dl ? &Gl(Eigen::Index(i), Eigen::Index(j0)) : nullptr,
+                         dc ? &Gc(Eigen::Index(i), Eigen::Index(j0)) : nullptr, margin, scale);
+            for (size_t j = 0; j < k; ++j)
+              if (margin[j] > bs) bs = margin[j], bj = int(j0 + j), bsc = scale[j];
+          }
+          best[i] = bj, best_sim[i] = bs, best_scale[i] = bsc;
         }
-        best[i] = bj, best_sim[i] = bs, best_scale[i] = bsc;
       }
     }
     // In order: zero vectors, matches, matches among this batch's new entries, new entries.
@@ -177,10 +210,12 @@ PassOut leader_pass(const Btf& btf, const ResamplePlan& plan, int level, Part pa
     // batch's Gram matrices, one GEMM each: the sequential part is then O(B x new entries)
     // SSIM evaluations instead of that many d-long dot products (on noisy data most vectors of
     // a batch are new, and this loop was the encoder's bottleneck).
-    MatrixXfR Hl, Hc;
-    if (dl) Hl.noalias() = Xl * Xl.transpose();
-    if (dc) Hc.noalias() = Xc * Xc.transpose();
+    Eigen::Map<MatrixXfR> Hl = hl_buf.view(B, dl ? B : 0), Hc = hc_buf.view(B, dc ? B : 0);
+    if (dl) product_rows(Hl, Xl, Xl.data(), B);
+    if (dc) product_rows(Hc, Xc, Xc.data(), B);
     std::vector<uint32_t> row_of;  // batch row of each entry created in this batch (index j - K0)
+    std::vector<float> hl, hc;     // a candidate's dot products with them, in entry order
+    std::vector<double> margin, scale;
     for (size_t i = 0; i < B; ++i) {
       const double* m = &xm[5 * i];
       const size_t ci = b0 + i;
@@ -191,15 +226,17 @@ PassOut leader_pass(const Btf& btf, const ResamplePlan& plan, int level, Part pa
       }
       double bs = best_sim[i], bsc = best_scale[i];
       int bj = best[i];
-      if (bs < 0) {
-        for (size_t j = K0; j < K; ++j) {
-          const double* e = &em[4 * j];
-          double s = 2, sc = 1;
-          const Eigen::Index r = Eigen::Index(row_of[j - K0]);
-          if (dl) s = ssim_from_moments(dl, m[0], m[1], e[0], e[1], Hl(Eigen::Index(i), r), m[2], true, &sc) - thr_l;
-          if (dc && s > bs) s = std::min(s, ssim_from_moments(dc, m[3], m[4], e[2], e[3], Hc(Eigen::Index(i), r), 1.0, false, nullptr) - thr_c);
-          if (s > bs) bs = s, bj = int(j), bsc = sc;
+      if (bs < 0 && K > K0) {
+        const size_t k = K - K0;
+        hl.resize(k), hc.resize(k), margin.resize(k), scale.resize(k);
+        for (size_t j = 0; j < k; ++j) {
+          const Eigen::Index r = Eigen::Index(row_of[j]);
+          if (dl) hl[j] = Hl(Eigen::Index(i), r);
+          if (dc) hc[j] = Hc(Eigen::Index(i), r);
         }
+        ssim_margins(scan_candidate(m), terms, K0, k, hl.data(), hc.data(), margin.data(), scale.data());
+        for (size_t j = 0; j < k; ++j)
+          if (margin[j] > bs) bs = margin[j], bj = int(K0 + j), bsc = scale[j];
       }
       if (bs >= 0 && bj >= 0) {
         out.idx[ci] = uint32_t(bj);
@@ -210,6 +247,7 @@ PassOut leader_pass(const Btf& btf, const ResamplePlan& plan, int level, Part pa
       if (dl) El.insert(El.end(), Xl.row(Eigen::Index(i)).data(), Xl.row(Eigen::Index(i)).data() + dl);
       if (dc) Ec.insert(Ec.end(), Xc.row(Eigen::Index(i)).data(), Xc.row(Eigen::Index(i)).data() + dc);
       em.insert(em.end(), {m[0], m[1], m[3], m[4]});
+      terms.add(dl, dc, m[0], m[1], m[3], m[4]);
       row_of.push_back(uint32_t(i));
       out.idx[ci] = uint32_t(K++);
       out.scale[ci] = 1;

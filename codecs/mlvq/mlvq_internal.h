@@ -145,12 +145,37 @@ void decode_slice(const Hierarchy& h, int level, Part part, uint32_t idx, float 
 // Full grid of a texel.
 void decode_texel(const Hierarchy& h, size_t texel, float* lum, float* chroma);
 
-// ---- SSIM of vectors (codebook.cpp) ---------------------------------------------------------------
+// ---- SSIM of vectors (ssim_scan.cpp) ------------------------------------------------------------
 // SSIM (Wang et al. 2004, one global window) between x and s e from their moments over n values:
 // sums of x, x^2, e, e^2, x e. `scaled`: s = max(0, <x, e> / <e, e>) (the entry matches up to a
 // scale, reported in *scale), else s = 1. Dynamic range L: C1 = (0.01 L)^2, C2 = (0.03 L)^2.
 double ssim_from_moments(double n, double sx, double sxx, double se, double see, double sxe, double L, bool scaled,
                          double* scale);
+
+// The codebook search's scan (leader_pass): one candidate against a run of entries, margins over
+// the thresholds as the search defines them, with ssim_from_moments' bits for every pair.
+// Entries' terms that do not depend on the candidate, by entry (appended as entries are made).
+struct EntryTerms {
+  std::vector<double> see_l, me_l, q_l, me_c, q_c;
+  // An entry with luminance sums se, see over n_lum values and chromaticity sums sec, seec over
+  // n_chroma (a part absent: n = 0).
+  void add(double n_lum, double n_chroma, double se, double see, double sec, double seec);
+};
+struct ScanCandidate {
+  double n_lum = 0, sx = 0, sxx = 0, L = 0;  // luminance: values (0: no luminance part), sums, peak
+  double n_chroma = 0, sxc = 0, sxxc = 0;    // chromaticity (range 1)
+  double thr_l = 0, thr_c = 0;
+};
+// For entries j0 .. j0 + k - 1, with gl[i] / gc[i] = <x, e_{j0 + i}> of the luminance /
+// chromaticity parts (floats, as the search's GEMMs give them; a part absent: unused):
+//   margin[i] = min(lum SSIM - thr_l, chroma SSIM - thr_c) over the parts present, where
+//               lum SSIM = ssim_from_moments(n_lum, sx, sxx, se, see, gl[i], L, true, &s),
+//               chroma SSIM = ssim_from_moments(n_chroma, sxc, sxxc, sec, seec, gc[i], 1, false)
+//               (the luminance term is 2 when there is none),
+//   scale[i]  = s (1 without luminance).
+// The search takes the first entry of the largest margin, a margin >= 0 being a match.
+void ssim_margins(const ScanCandidate& x, const EntryTerms& e, size_t j0, size_t k, const float* gl, const float* gc, double* margin,
+                  double* scale);
 
 // ---- noise-adaptive thresholds (noise.cpp) -----------------------------------------------------
 // Per (light, view) image (index l + nl v): the noise variance of luminance L and of the
