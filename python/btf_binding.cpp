@@ -47,9 +47,15 @@ void ProgressBridge::rethrow() {
   if (m_error) std::rethrow_exception(std::exchange(m_error, nullptr));
 }
 
+const std::shared_ptr<Btf>& PyBtf::live() const {
+  if (consumed)
+    throw_status(invalid_argument("this btfc.Btf was consumed by compress(consume=True): its values are gone; open or build it again"));
+  return btf;
+}
+
 py::array values_view(const PyBtf& b) {
-  const BtfDesc& d = b.btf->desc();
-  auto* owner = new std::shared_ptr<Btf>(b.btf);
+  const BtfDesc& d = b.live()->desc();
+  auto* owner = new std::shared_ptr<Btf>(b.live());
   py::capsule base(owner, [](void* p) { delete static_cast<std::shared_ptr<Btf>*>(p); });
   const std::vector<py::ssize_t> shape{d.height, d.width, py::ssize_t(d.num_views()), py::ssize_t(d.num_lights()), d.channels};
   std::vector<py::ssize_t> strides(5);
@@ -58,7 +64,7 @@ py::array values_view(const PyBtf& b) {
     strides[size_t(i)] = s;
     s *= shape[size_t(i)];
   }
-  return py::array_t<float>(shape, strides, b.btf->data(), base);
+  return py::array_t<float>(shape, strides, b.live()->data(), base);
 }
 
 py::array directions_array(const DirectionSet& set) {
@@ -136,28 +142,28 @@ void bind_btf(py::module_& m) {
              py::array v = values_view(b);
              return dtype.is_none() ? v : py::array(v.attr("astype")(dtype));
            }, py::arg("dtype") = py::none())
-      .def_property_readonly("lights", [](const PyBtf& b) { return directions_array(b.btf->desc().lights); }, "(lights, 3) unit vectors.")
-      .def_property_readonly("views", [](const PyBtf& b) { return directions_array(b.btf->desc().views); }, "(views, 3) unit vectors.")
-      .def_property_readonly("lights_name", [](const PyBtf& b) { return b.btf->desc().lights.name; }, "'ubo2003', 'ubo2014' or 'custom'.")
-      .def_property_readonly("views_name", [](const PyBtf& b) { return b.btf->desc().views.name; })
-      .def_property_readonly("width", [](const PyBtf& b) { return b.btf->desc().width; })
-      .def_property_readonly("height", [](const PyBtf& b) { return b.btf->desc().height; })
-      .def_property_readonly("channels", [](const PyBtf& b) { return b.btf->desc().channels; })
-      .def_property_readonly("hdr", [](const PyBtf& b) { return b.btf->desc().hdr; }, "Linear HDR values (PSNR peak and SSIM range rules, core/metrics.h).")
+      .def_property_readonly("lights", [](const PyBtf& b) { return directions_array(b.live()->desc().lights); }, "(lights, 3) unit vectors.")
+      .def_property_readonly("views", [](const PyBtf& b) { return directions_array(b.live()->desc().views); }, "(views, 3) unit vectors.")
+      .def_property_readonly("lights_name", [](const PyBtf& b) { return b.live()->desc().lights.name; }, "'ubo2003', 'ubo2014' or 'custom'.")
+      .def_property_readonly("views_name", [](const PyBtf& b) { return b.live()->desc().views.name; })
+      .def_property_readonly("width", [](const PyBtf& b) { return b.live()->desc().width; })
+      .def_property_readonly("height", [](const PyBtf& b) { return b.live()->desc().height; })
+      .def_property_readonly("channels", [](const PyBtf& b) { return b.live()->desc().channels; })
+      .def_property_readonly("hdr", [](const PyBtf& b) { return b.live()->desc().hdr; }, "Linear HDR values (PSNR peak and SSIM range rules, core/metrics.h).")
       .def_property_readonly("shape", [](const PyBtf& b) { return values_view(b).attr("shape"); })
       .def(
           "image",
           [](const PyBtf& b, int light, int view) {
-            const BtfDesc& d = b.btf->desc();
+            const BtfDesc& d = b.live()->desc();
             if (light < 0 || size_t(light) >= d.num_lights() || view < 0 || size_t(view) >= d.num_views())
               throw_status(invalid_argument("image: light " + std::to_string(light) + ", view " + std::to_string(view) + " outside " +
                                             std::to_string(d.num_lights()) + " lights x " + std::to_string(d.num_views()) + " views"));
             // data[:, :, view, light, :] as its own strided view of the buffer.
-            auto* owner = new std::shared_ptr<Btf>(b.btf);
+            auto* owner = new std::shared_ptr<Btf>(b.live());
             py::capsule base(owner, [](void* p) { delete static_cast<std::shared_ptr<Btf>*>(p); });
             const py::ssize_t f = sizeof(float), texel = py::ssize_t(d.abrdf_size()) * f;
             return py::array_t<float>({py::ssize_t(d.height), py::ssize_t(d.width), py::ssize_t(d.channels)},
-                                      {texel * d.width, texel, f}, b.btf->data() + d.row(size_t(light), size_t(view), 0), base);
+                                      {texel * d.width, texel, f}, b.live()->data() + d.row(size_t(light), size_t(view), 0), base);
           },
           py::arg("light"), py::arg("view"), "One (light, view) image, (height, width, channels): a strided view.")
       .def(
@@ -167,11 +173,12 @@ void bind_btf(py::module_& m) {
             if (image_format == "png") f = ImageFormat::png;
             else if (image_format != "exr") throw_status(invalid_argument("save: image_format must be 'exr' or 'png'"));
             py::gil_scoped_release nogil;
-            check(write_btf(*b.btf, path, f));
+            check(write_btf(*b.live(), path, f));
           },
           py::arg("path"), py::arg("image_format") = "exr",
           "Writes the raw BTF: a .btfc container, or else an image-set directory (UBO2003 names).")
       .def("__repr__", [](const PyBtf& b) {
+        if (b.consumed) return std::string("<btfc.Btf, consumed by compress(consume=True)>");
         return "<btfc.Btf " + b.btf->desc().summary() + (b.btf->desc().hdr ? ", HDR" : "") + ">";
       });
 }

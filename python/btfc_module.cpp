@@ -178,10 +178,14 @@ PYBIND11_MODULE(btfc, m) {
       py::arg("path"), "Opens a model: a .btfc written by any codec, or a Bonn .btf file (FMF / DFMF).");
   m.def(
       "compress",
-      [](const PyBtf& btf, const std::string& spec, std::optional<double> max_bytes, std::optional<double> target_psnr,
-         std::optional<double> target_ssim, uint64_t seed, const py::object& progress) {
+      [](PyBtf& btf, const std::string& spec, std::optional<double> max_bytes, std::optional<double> target_psnr,
+         std::optional<double> target_ssim, uint64_t seed, const py::object& progress, bool consume) {
         const int targets = int(max_bytes.has_value()) + int(target_psnr.has_value()) + int(target_ssim.has_value());
         if (targets > 1) throw_status(invalid_argument("compress: give at most one of max_bytes, target_psnr, target_ssim"));
+        if (consume && targets > 0)
+          throw_status(invalid_argument("compress: consume=True cannot be combined with max_bytes, target_psnr or target_ssim (the "
+                                        "search encodes and compares against the values several times)"));
+        const std::shared_ptr<Btf> input = btf.live();
         ProgressBridge bridge(progress);
         Context ctx;
         ctx.seed = seed;
@@ -195,7 +199,7 @@ PYBIND11_MODULE(btfc, m) {
           Result<TargetChoice> r = unsupported("compress");
           {
             py::gil_scoped_release nogil;
-            r = choose_for_target(*btf.btf, spec, t, ctx);
+            r = choose_for_target(*input, spec, t, ctx);
           }
           bridge.rethrow();
           TargetChoice c = unwrap(std::move(r));
@@ -210,10 +214,16 @@ PYBIND11_MODULE(btfc, m) {
         } else {
           auto [codec, params] = unwrap(resolve_spec(spec));
           Result<std::unique_ptr<Model>> r = unsupported("compress");
+          // consume=True: as `btfc compress` lets it, the encode may work in the values' own
+          // memory (fmf color=dfmf converts them in place: less memory and time). The Btf is
+          // consumed whatever the outcome (a failed encode may have changed the values), and
+          // released here: arrays taken from it earlier keep the memory, with unspecified values.
+          if (consume) ctx.consumable = input.get();
           {
             py::gil_scoped_release nogil;
-            r = codec->encode(*btf.btf, params, ctx);
+            r = codec->encode(*input, params, ctx);
           }
+          if (consume) btf.consumed = true, btf.btf.reset();
           bridge.rethrow();
           model = unwrap(std::move(r));
         }
@@ -222,19 +232,23 @@ PYBIND11_MODULE(btfc, m) {
         return out;
       },
       py::arg("btf"), py::arg("spec") = "fmf", py::kw_only(), py::arg("max_bytes") = py::none(), py::arg("target_psnr") = py::none(),
-      py::arg("target_ssim") = py::none(), py::arg("seed") = 1, py::arg("progress") = py::none(),
+      py::arg("target_ssim") = py::none(), py::arg("seed") = 1, py::arg("progress") = py::none(), py::arg("consume") = false,
       "Compresses a Btf with a spec string ('fmf:rank=32', 'lpca', 'mlvq:scheme=2', ...; unknown\n"
       "parameters are errors). At most one target: max_bytes (the most accurate setting whose\n"
       "payload fits), target_psnr (dB) or target_ssim (mean SSIM): the codec's quality knob is\n"
       "searched as `btfc compress --max-bytes/--target-psnr/--target-ssim` does, and the chosen\n"
-      "setting is in model.target. The same seed gives the same model as the CLI's --seed.");
+      "setting is in model.target. The same seed gives the same model as the CLI's --seed.\n"
+      "consume=True hands the values over, as `btfc compress` does with its input: the encode may\n"
+      "work in their memory (fmf color=dfmf then converts in place, with less memory and time), and\n"
+      "the Btf cannot be used afterwards (its arrays taken earlier hold unspecified values). Not\n"
+      "with a target.");
   m.def(
       "compare",
       [](const PyBtf& a, const PyBtf& b, bool ssim) {
         Result<Metrics> r = unsupported("compare");
         {
           py::gil_scoped_release nogil;
-          r = compare_btf(*a.btf, *b.btf, ssim);
+          r = compare_btf(*a.live(), *b.live(), ssim);
         }
         return metrics_dict(unwrap(std::move(r)));
       },
@@ -254,7 +268,7 @@ PYBIND11_MODULE(btfc, m) {
           Result<std::vector<RgbImage>> r = unsupported("bench");
           {
             py::gil_scoped_release nogil;
-            r = reference_renders(*btf.btf);
+            r = reference_renders(*btf.live());
           }
           refs = unwrap(std::move(r));
         }
@@ -268,7 +282,7 @@ PYBIND11_MODULE(btfc, m) {
           Result<BenchResult> r = unsupported("bench");
           {
             py::gil_scoped_release nogil;
-            r = run_benchmark(*btf.btf, spec, opt);
+            r = run_benchmark(*btf.live(), spec, opt);
           }
           bridge.rethrow();
           rows.append(bench_row(label, unwrap(std::move(r)), renders));

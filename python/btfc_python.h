@@ -50,6 +50,9 @@ void register_errors(py::module_& m);
 // A BTF shared between Python objects: the numpy views of its values keep it alive.
 struct PyBtf {
   std::shared_ptr<Btf> btf;
+  bool consumed = false;  // compress(consume=True) took the values (btf is then null)
+  // The BTF, or a btfc.Error when compress(consume=True) has taken it.
+  const std::shared_ptr<Btf>& live() const;
 };
 
 struct PyModel {

@@ -157,6 +157,28 @@ def test_targets_and_budget(synth_file):
         btfc.compress(b, "fmf", max_bytes=1000, target_psnr=30)
 
 
+def test_consume_hands_the_values_over(synth_file):
+    # The dfmf encode converts a consumed BTF in place (the CLI's path); the model is the one the
+    # streamed conversion gives to round-off, and the Btf is gone afterwards.
+    keep = btfc.open(str(synth_file))
+    want = btfc.compress(keep, "fmf:color=dfmf:rank=6:svd=randomized")
+    b = btfc.open(str(synth_file))
+    view = b.data
+    got = btfc.compress(b, "fmf:color=dfmf:rank=6:svd=randomized", consume=True)
+    e_want = btfc.compare(keep, want.decode(), ssim=False)["rel_l2"]
+    e_got = btfc.compare(keep, got.decode(), ssim=False)["rel_l2"]
+    assert 0.01 < e_want < 0.5 and abs(e_got - e_want) <= 0.01 * e_want
+    assert not np.array_equal(view, keep.data)  # the values were converted in place
+    assert "consumed" in repr(b)
+    with pytest.raises(btfc.Error, match="consumed by compress"):
+        b.data
+    with pytest.raises(btfc.Error, match="consumed by compress"):
+        btfc.compress(b, "fmf:rank=2")
+    with pytest.raises(btfc.Error, match="consume=True cannot be combined"):
+        btfc.compress(keep, "fmf", max_bytes=60000, consume=True)
+    assert keep.data.shape == (16, 16, 81, 81, 3)  # a refused call takes nothing
+
+
 # --- decode and eval --------------------------------------------------------------------------
 
 def test_decode_region_and_subsets_equal_the_full_decode(synth_file):
