@@ -14,8 +14,8 @@
 // the same values, each kept operation is the formula's own in its order, and this file is
 // compiled with -ffp-contract=off (CMakeLists.txt) so that no clone fuses a multiply and an
 // add (and with -fno-trapping-math, which changes no value: it lets the vectorizer evaluate
-// both sides of the scale's select). So the encode's choices (and its files) do not depend on the CPU or on this path;
-// tests/mlvq_test.cpp checks the scan against the formula pair by pair.
+// both sides of the scale's select). So the scan changes none of the search's choices, on any
+// CPU clone; tests/mlvq_test.cpp checks it against the formula pair by pair.
 #include <algorithm>
 #include <cstddef>
 
