@@ -12,8 +12,12 @@
 //   - a coherent stream (frames of all texels under one direction pair) through eval_batch.
 // With --color dfmf: a color=dfmf model instead (three channel blocks of 6561 rows, Bonn's
 // offset), its eval_batch (C++ path, fmf_eval_dfmf.cpp) against the per-query reference only.
+// Then every codec beside it (unless --codecs 0): each codec's default model, fmf at rank 32, of
+// one BTF (--btf PATH, any input btfc reads; else btfc's synth material at 64 x 64 texels),
+// its random interpolated evaluations per second through Model::eval_batch on the C++ path, as
+// `btfc bench` measures them (codecs/measure.h: 131072 random queries per round, rounds for 1 s).
 //
-//   bench_eval [--texels 65536] [--rank 32] [--queries 4000000] [--color rgb|dfmf]
+//   bench_eval [--texels 65536] [--rank 32] [--queries 4000000] [--color rgb|dfmf] [--btf PATH] [--codecs 0|1]
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -25,19 +29,56 @@
 #include "codecs/fmf/fmf_cl.h"
 #include "codecs/fmf/fmf_eval.h"
 #include "codecs/fmf/fmf_model.h"
+#include "codecs/measure.h"
 #include "core/cl_runtime.h"
 #include "core/cpu_dispatch.h"
+#include "core/synth.h"
+#include "formats/btf_io.h"
 
 using namespace btfc;
 
 using btfc::bench::best_of;
 using btfc::bench::now_s;
 
+namespace {
+
+// The BTF of the every-codec table (the file comment): --btf's, else btfc's synth material.
+Result<Btf> codec_btf(const std::string& path) {
+  if (!path.empty()) return read_btf(path);
+  SynthOptions so;
+  so.width = so.height = 64;
+  return synthesize_btf(so);
+}
+
+// Every codec's random-query rate on `btf` (the file comment): its default model (fmf at rank 32,
+// the rank of the headline), C++ path.
+void every_codec(const Btf& btf, const std::string& name) {
+  const BtfDesc& d = btf.desc();
+  std::printf("every codec's default model of %s (%d x %d texels, %zu x %zu directions): random interpolated evaluations, C++ path\n",
+              name.c_str(), d.width, d.height, d.num_lights(), d.num_views());
+  ocl::set_device_choice(ocl::DeviceChoice::cpu);
+  BenchOptions opt;
+  opt.renders = false;
+  opt.throughput_seconds = 1.0;
+  for (const char* spec : {"fmf:rank=32", "fmf:rank=32:color=dfmf", "lpca", "lpyr", "mlvq"}) {
+    Result<BenchResult> r = run_benchmark(btf, spec, opt);
+    if (!r.ok()) {
+      std::printf("  %-24s %s\n", spec, r.status().message().c_str());
+      continue;
+    }
+    std::printf("  %-24s %8.2f M evals/s   (ratio %.0f, PSNR %.1f dB, encode %.1f s)\n", spec, r.value().evals_per_second / 1e6,
+                r.value().ratio, r.value().metrics.psnr, r.value().encode_seconds);
+  }
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
   int texels = 65536, C = 32;
   size_t nq = 4000000;
   bool profile = false;  // --profile 1: only the blend, repeated (for perf)
-  std::string color = "rgb", precision = "half";
+  std::string color = "rgb", precision = "half", btf_path;
+  bool codecs = true;
   for (int i = 1; i + 1 < argc; i += 2) {
     std::string a = argv[i];
     if (a == "--texels") texels = std::atoi(argv[i + 1]);
@@ -46,11 +87,24 @@ int main(int argc, char** argv) {
     else if (a == "--profile") profile = std::atoi(argv[i + 1]) != 0;
     else if (a == "--color") color = argv[i + 1];
     else if (a == "--precision") precision = argv[i + 1];
+    else if (a == "--btf") btf_path = argv[i + 1];
+    else if (a == "--codecs") codecs = std::atoi(argv[i + 1]) != 0;
   }
   if (color != "rgb" && color != "dfmf") {
     std::fprintf(stderr, "bench_eval: --color %s: expected rgb or dfmf\n", color.c_str());
     return 2;
   }
+  // The every-codec table's BTF first, so that a bad --btf fails before the long part.
+  Btf codec_input;
+  if (codecs) {
+    Result<Btf> r = codec_btf(btf_path);
+    if (!r.ok()) {
+      std::fprintf(stderr, "bench_eval: %s\n", r.status().message().c_str());
+      return 1;
+    }
+    codec_input = std::move(r).value();
+  }
+  const std::string codec_name = btf_path.empty() ? "btfc synth" : btf_path;
   const int side = int(std::lround(std::sqrt(double(texels))));
   texels = side * side;
   BtfDesc desc;
@@ -126,6 +180,7 @@ int main(int argc, char** argv) {
     } else {
       std::printf("OpenCL: no device\n");
     }
+    if (codecs) every_codec(codec_input, codec_name);
     return 0;
   }
   fmf::Block b;
@@ -245,5 +300,6 @@ int main(int argc, char** argv) {
     std::printf("eval_batch on OpenCL (%s): random %.1f, coherent %.1f M evals/s\n", ocl::Runtime::get().value()->info().type.c_str(),
                 rate(t_r), rate(t_c));
   }
+  if (codecs) every_codec(codec_input, codec_name);
   return 0;
 }
