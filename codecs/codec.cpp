@@ -70,14 +70,18 @@ Result<std::unique_ptr<Model>> load_model(const ContainerReader& reader) {
   return codec->load(reader);
 }
 
-Status Model::eval_batch(std::span<const EvalQuery> q, float* out) const {
-  const BtfDesc& d = desc();
-  const size_t nc = size_t(d.channels);
-  for (const EvalQuery& e : q)  // validate first, so the parallel loop cannot fail
+Status check_eval_queries(const BtfDesc& d, std::span<const EvalQuery> q) {
+  for (const EvalQuery& e : q)
     if (e.x < 0 || e.y < 0 || e.x >= d.width || e.y >= d.height || (e.light >= 0) != (e.view >= 0) ||
         (e.light >= 0 && (size_t(e.light) >= d.num_lights() || size_t(e.view) >= d.num_views())))
       return invalid_argument("eval query (" + std::to_string(e.x) + ", " + std::to_string(e.y) + ", light " +
                               std::to_string(e.light) + ", view " + std::to_string(e.view) + ") is outside the BTF");
+  return {};
+}
+
+Status Model::eval_batch(std::span<const EvalQuery> q, float* out) const {
+  const size_t nc = size_t(desc().channels);
+  BTFC_RETURN_IF_ERROR(check_eval_queries(desc(), q));  // first, so the parallel loop cannot fail
 #pragma omp parallel for schedule(static)
   for (size_t i = 0; i < q.size(); ++i) {
     if (q[i].light >= 0) eval(q[i].x, q[i].y, q[i].light, q[i].view, out + i * nc);

@@ -49,6 +49,10 @@ struct EvalQuery {
   Vec3 wl, wv;
 };
 
+// The first query outside `d` (texel, or a measured index), as an invalid_argument naming it; ok
+// when all are inside. Every eval_batch runs it before evaluating anything.
+Status check_eval_queries(const BtfDesc& d, std::span<const EvalQuery> q);
+
 // Named statistics, in insertion order, for `btfc info` / `--json`.
 struct ModelStats {
   std::vector<std::pair<std::string, double>> numbers;
@@ -73,7 +77,8 @@ class Model {
   virtual Status eval_dir(int x, int y, const Vec3& wl, const Vec3& wv, float* out) const = 0;
 
   // Many evaluations (out: channels floats per query), the throughput path: the default loops
-  // over eval / eval_dir in parallel; codecs with an OpenCL kernel override it.
+  // over eval / eval_dir in parallel; codecs with a faster path (OpenCL, blended rows) override
+  // it. Every query is checked first (check_eval_queries), so nothing is written on an error.
   virtual Status eval_batch(std::span<const EvalQuery> q, float* out) const;
   // Value at a continuous level of detail (0 = full detail). Codecs without levels of detail
   // answer unsupported for lod != 0.

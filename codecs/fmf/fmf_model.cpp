@@ -50,10 +50,7 @@ Status FmfModel::decode_cl(const ResolvedRequest& rr, Btf& out) const {
 
 Status FmfModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
   if (m_cfg.color_model >= 0 || (m_cfg.dfmf && m_desc.channels != 3)) return Model::eval_batch(q, out);
-  for (const EvalQuery& e : q)
-    if (e.x < 0 || e.y < 0 || e.x >= m_desc.width || e.y >= m_desc.height || (e.light >= 0) != (e.view >= 0) ||
-        (e.light >= 0 && (size_t(e.light) >= m_desc.num_lights() || size_t(e.view) >= m_desc.num_views())))
-      return Model::eval_batch(q, out);  // the reference reports the bad query
+  BTFC_RETURN_IF_ERROR(check_eval_queries(m_desc, q));
   // On a CPU, the C++ paths (rgb: the sorted blocks of fmf_eval.h; dfmf: fmf_eval_dfmf.cpp). They
   // are also faster than the OpenCL kernels on PoCL's CPU device (docs/benchmarks.md), so OpenCL
   // serves eval_batch only on a GPU or when asked for (--device cl).

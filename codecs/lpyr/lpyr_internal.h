@@ -117,6 +117,9 @@ class LpyrModel final : public Model {
   Status decode(const DecodeRequest& req, Btf& out) const override;
   void eval(int x, int y, int light, int view, float* out) const override;
   Status eval_dir(int x, int y, const Vec3& wl, const Vec3& wv, float* out) const override;
+  // eval / eval_dir's values (to float round-off: the pairs blended in YCbCr, then one
+  // conversion), without their per-call overheads: lpyr_model.cpp says why.
+  Status eval_batch(std::span<const EvalQuery> q, float* out) const override;
   Status eval_lod(int x, int y, int light, int view, double lod, float* out) const override;
   Result<std::vector<Tensor>> gpu_tensors() const override;
   Status save(ContainerWriter& w) const override;

@@ -138,6 +138,103 @@ Status LpyrModel::eval_dir(int x, int y, const Vec3& wl, const Vec3& wv, float* 
   return {};
 }
 
+namespace {
+
+// sum_p w[p] (d . E.row(row[p]) + mean[row[p]]) over a level's C components (mean may be null),
+// C a constant where it is one of the small counts lpyr's levels have: with a run-time count
+// GCC's loop of 2-8 values was most of a query (perf).
+template <int C>
+float blend_fixed(const float* d, const float* E, const float* mean, const size_t* row, const float* w, int np) {
+  float acc = 0;
+  for (int p = 0; p < np; ++p) {
+    const float* er = E + row[p] * size_t(C);
+    float v = 0;
+    for (int i = 0; i < C; ++i) v += d[i] * er[i];
+    if (mean) v += mean[row[p]];
+    acc += w[p] * v;
+  }
+  return acc;
+}
+float blend_pairs(const float* d, const float* E, size_t C, const float* mean, const size_t* row, const float* w, int np) {
+  switch (C) {
+    case 1: return blend_fixed<1>(d, E, mean, row, w, np);
+    case 2: return blend_fixed<2>(d, E, mean, row, w, np);
+    case 3: return blend_fixed<3>(d, E, mean, row, w, np);
+    case 4: return blend_fixed<4>(d, E, mean, row, w, np);
+    case 6: return blend_fixed<6>(d, E, mean, row, w, np);
+    case 8: return blend_fixed<8>(d, E, mean, row, w, np);
+    case 12: return blend_fixed<12>(d, E, mean, row, w, np);
+    case 16: return blend_fixed<16>(d, E, mean, row, w, np);
+    default: break;
+  }
+  float acc = 0;
+  for (int p = 0; p < np; ++p) {
+    const float* er = E + row[p] * C;
+    float v = 0;
+    for (size_t i = 0; i < C; ++i) v += d[i] * er[i];
+    if (mean) v += mean[row[p]];
+    acc += w[p] * v;
+  }
+  return acc;
+}
+
+}  // namespace
+
+// Random queries (issue 24, `bench_eval`'s every-codec table): the generic loop ran eval_dir per
+// query, whose 9 pairs each went through eval() (Eigen dots of 2-16 values, a level weight in
+// double and a YCbCr conversion per pair, the directions located one call at a time): 4.3-4.7 M
+// evals/s on 2 cores on the textile's model, ~1400 cycles per query for ~320 multiply-adds. Here
+// the directions are located in groups (weights_batch: weights()'s bits), and each channel's
+// levels blend the pairs in plain loops over their C components, converted to RGB once. The same
+// terms as eval_dir (every level at weight 1 at lod 0), summed in another order.
+Status LpyrModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
+  BTFC_RETURN_IF_ERROR(check_eval_queries(m_desc, q));
+  const size_t nl = m_desc.num_lights();
+  constexpr size_t G = 256;
+  const long long groups = (long long)((q.size() + G - 1) / G);
+#pragma omp parallel for schedule(static)
+  for (long long g = 0; g < groups; ++g) {
+    const size_t i0 = size_t(g) * G, m = std::min(G, q.size() - i0);
+    Vec3 dl[G], dv[G];
+    DirWeights wa[G], wb[G];
+    uint32_t who[G];
+    size_t k = 0;
+    for (size_t j = 0; j < m; ++j) {
+      const EvalQuery& e = q[i0 + j];
+      if (e.light >= 0) eval(e.x, e.y, e.light, e.view, out + 3 * (i0 + j));
+      else dl[k] = e.wl, dv[k] = e.wv, who[k++] = uint32_t(j);
+    }
+    m_light_interp.weights_batch(dl, k, wa);
+    m_view_interp.weights_batch(dv, k, wb);
+    for (size_t j = 0; j < k; ++j) {
+      const EvalQuery& e = q[i0 + who[j]];
+      size_t row[9];
+      float w[9];
+      int np = 0;
+      for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b) {
+          const float ww = wa[j].weight[size_t(a)] * wb[j].weight[size_t(b)];
+          if (ww == 0) continue;
+          row[np] = size_t(wa[j].index[size_t(a)]) + nl * size_t(wb[j].index[size_t(b)]), w[np++] = ww;
+        }
+      float ycc[3];
+      for (int c = 0; c < 3; ++c) {
+        float acc = 0;
+        for (int lv = 0; lv <= lmax(); ++lv) {
+          const Level& l = m_levels[size_t(lv)];
+          const Block& b = l.ch[c];
+          const size_t C = size_t(b.E.cols());
+          const float* d = b.D.data() + (size_t(e.x >> lv) + size_t(l.size.w) * size_t(e.y >> lv)) * C;
+          acc += blend_pairs(d, b.E.data(), C, b.mean.size() ? b.mean.data() : nullptr, row, w, np);
+        }
+        ycc[c] = acc;
+      }
+      ycbcr_to_rgb(ycc, out + 3 * (i0 + who[j]));
+    }
+  }
+  return {};
+}
+
 // All weighted levels of a channel are one GEMM: [w_k D_k(p >> k)]_k (texels x sum C) times
 // [E_k]_k^T (sum C x directions), plus the weighted sum of the means.
 Status LpyrModel::decode(const DecodeRequest& req, Btf& out) const {

@@ -141,11 +141,7 @@ Status MlvqModel::eval_dir(int x, int y, const Vec3& wl, const Vec3& wv, float* 
 Status MlvqModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
   const BtfDesc& d = m_desc;
   const size_t nc = size_t(d.channels);
-  for (const EvalQuery& e : q)
-    if (e.x < 0 || e.y < 0 || e.x >= d.width || e.y >= d.height || (e.light >= 0) != (e.view >= 0) ||
-        (e.light >= 0 && (size_t(e.light) >= d.num_lights() || size_t(e.view) >= d.num_views())))
-      return invalid_argument("eval query (" + std::to_string(e.x) + ", " + std::to_string(e.y) + ", light " + std::to_string(e.light) +
-                              ", view " + std::to_string(e.view) + ") is outside the BTF");
+  BTFC_RETURN_IF_ERROR(check_eval_queries(d, q));
   if (m_h.grid.measured()) {
     // Queries at arbitrary directions blend the 9 measured pairs around them (single grid nodes,
     // one codebook walk each), each query on its own, in parallel: expanding them into a batch
