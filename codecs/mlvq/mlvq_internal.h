@@ -139,6 +139,9 @@ struct Hierarchy {
 // Luminance / chromaticity / RGB of one node of a texel: chained lookups from the texel's entry
 // (coord[k] = node index at level k, coord[0] unused).
 void node_lrg(const Hierarchy& h, size_t texel, const int coord[5], float lrg[3]);
+// node_lrg of n nodes of one texel (coord[j], lrg[j]), the walks interleaved level by level: the
+// same values, their loads in flight together.
+void node_lrg_many(const Hierarchy& h, size_t texel, const int (*coord)[5], size_t n, float (*lrg)[3]);
 // Decodes a whole level-k slice of entry `idx` of part `part` (rgb slices end in M), multiplied
 // by `sc`, into lum[slice_len(k)] and (unless null) chroma[2 slice_len(k)].
 void decode_slice(const Hierarchy& h, int level, Part part, uint32_t idx, float sc, float* lum, float* chroma);

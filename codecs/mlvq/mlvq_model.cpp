@@ -51,32 +51,55 @@ void decode_texel(const Hierarchy& h, size_t texel, float* lum, float* chroma) {
   decode_slice(h, 4, k_rgb, h.texel_idx[texel], h.texel_scale[texel], lum, chroma);
 }
 
+void node_lrg_many(const Hierarchy& h, size_t texel, const int (*coord)[5], size_t n, float (*lrg)[3]) {
+  constexpr size_t G = 16;  // walks in flight: their loads of one level issue back to back
+  for (size_t j0 = 0; j0 < n; j0 += G) {
+    const size_t g = std::min(G, n - j0);
+    const int (*cd)[5] = coord + j0;
+    uint32_t e[G], li[G], ci[G];
+    float sc[G];
+    for (size_t j = 0; j < g; ++j) e[j] = h.texel_idx[texel], sc[j] = h.texel_scale[texel];
+    const int s = h.scheme;
+    for (int k = 4; k > s; --k) {
+      const Book& b = h.rgb[k];
+      for (size_t j = 0; j < g; ++j) {
+        const size_t o = size_t(e[j]) * b.n + size_t(cd[j][k]);
+        sc[j] *= b.scale[o];
+        e[j] = b.child[o];
+      }
+    }
+    for (size_t j = 0; j < g; ++j) li[j] = h.merge_lum[e[j]], ci[j] = h.merge_chroma[e[j]];
+    for (int k = s; k > 1; --k)
+      for (size_t j = 0; j < g; ++j) {
+        const size_t o = size_t(li[j]) * h.lum[k].n + size_t(cd[j][k]);
+        sc[j] *= h.lum[k].scale[o];
+        li[j] = h.lum[k].child[o];
+        ci[j] = h.chroma[k].child[size_t(ci[j]) * h.chroma[k].n + size_t(cd[j][k])];
+      }
+    const size_t nb = size_t(h.grid.nbeta);
+    for (size_t j = 0; j < g; ++j) {
+      float* out = lrg[j0 + j];
+      out[0] = sc[j] * h.lum[1].values[size_t(li[j]) * nb + size_t(cd[j][1])];
+      out[1] = h.chroma[1].values[2 * (size_t(ci[j]) * nb + size_t(cd[j][1]))];
+      out[2] = h.chroma[1].values[2 * (size_t(ci[j]) * nb + size_t(cd[j][1])) + 1];
+    }
+  }
+}
+
 void node_lrg(const Hierarchy& h, size_t texel, const int coord[5], float lrg[3]) {
-  const int s = h.scheme;
-  uint32_t e = h.texel_idx[texel];
-  float sc = h.texel_scale[texel];
-  for (int k = 4; k > s; --k) {
-    const Book& b = h.rgb[k];
-    const size_t o = size_t(e) * b.n + size_t(coord[k]);
-    sc *= b.scale[o];
-    e = b.child[o];
-  }
-  uint32_t li = h.merge_lum[e], ci = h.merge_chroma[e];
-  for (int k = s; k > 1; --k) {
-    const size_t o = size_t(li) * h.lum[k].n + size_t(coord[k]);
-    sc *= h.lum[k].scale[o];
-    li = h.lum[k].child[o];
-    ci = h.chroma[k].child[size_t(ci) * h.chroma[k].n + size_t(coord[k])];
-  }
-  const size_t nb = size_t(h.grid.nbeta);
-  lrg[0] = sc * h.lum[1].values[size_t(li) * nb + size_t(coord[1])];
-  lrg[1] = h.chroma[1].values[2 * (size_t(ci) * nb + size_t(coord[1]))];
-  lrg[2] = h.chroma[1].values[2 * (size_t(ci) * nb + size_t(coord[1])) + 1];
+  node_lrg_many(h, texel, reinterpret_cast<const int(*)[5]>(coord), 1, reinterpret_cast<float(*)[3]>(lrg));
 }
 
 void eval_stencil(const Hierarchy& h, size_t texel, const Stencil& s, float rgb[3]) {
   float acc[3] = {0, 0, 0}, v[3], lrg[3];
-  for (int m = 0; m < 16; ++m) {
+  // Only the nodes whose four level weights are all nonzero, in the same ascending order: a
+  // measured pair's stencil is one node, and computing the other 15 products only to skip them
+  // was the largest part of a random query (perf, `btfc bench -c mlvq`). Same sums, same bits.
+  constexpr unsigned k_half[4][2] = {{0x5555, 0xAAAA}, {0x3333, 0xCCCC}, {0x0F0F, 0xF0F0}, {0x00FF, 0xFF00}};
+  unsigned live = 0xFFFF;
+  for (int k = 0; k < 4; ++k) live &= (s.w[k][0] != 0 ? k_half[k][0] : 0u) | (s.w[k][1] != 0 ? k_half[k][1] : 0u);
+  for (; live; live &= live - 1) {
+    const int m = __builtin_ctz(live);
     const float w = s.w[0][m & 1] * s.w[1][(m >> 1) & 1] * s.w[2][(m >> 2) & 1] * s.w[3][(m >> 3) & 1];
     if (w == 0) continue;
     const int cd[5] = {0, s.i[0][m & 1], s.i[1][(m >> 1) & 1], s.i[2][(m >> 2) & 1], s.i[3][(m >> 3) & 1]};
@@ -106,15 +129,45 @@ void MlvqModel::dir_pairs(const Vec3& wl, const Vec3& wv, uint32_t pair[9], floa
                    w[3 * i + j] = a.weight[size_t(i)] * b.weight[size_t(j)];
 }
 
+// eval_stencil of each pair, with the codebook walks of all pairs' nodes interleaved
+// (node_lrg_many): walked one after another, each walk's chain of dependent loads was most of a
+// random query (perf, `btfc bench -c mlvq`). The same products and sums in the same order as
+// eval_stencil per pair, so the same bits.
 void MlvqModel::blend_measured(size_t texel, const Vec3& wl, const Vec3& wv, float rgb[3]) const {
   uint32_t pair[9];
-  float w[9], v[3];
+  float w[9];
   dir_pairs(wl, wv, pair, w);
+  constexpr unsigned k_half[4][2] = {{0x5555, 0xAAAA}, {0x3333, 0xCCCC}, {0x0F0F, 0xF0F0}, {0x00FF, 0xFF00}};
+  int cd[9 * 16][5];
+  float nw[9 * 16], lrg[9 * 16][3];
+  int first[10];
+  size_t n = 0;
+  for (int k = 0; k < 9; ++k) {
+    first[k] = int(n);
+    if (w[k] == 0) continue;
+    const Stencil& s = m_measured[pair[k]];
+    unsigned live = 0xFFFF;
+    for (int l = 0; l < 4; ++l) live &= (s.w[l][0] != 0 ? k_half[l][0] : 0u) | (s.w[l][1] != 0 ? k_half[l][1] : 0u);
+    for (; live; live &= live - 1) {
+      const int m = __builtin_ctz(live);
+      const float wm = s.w[0][m & 1] * s.w[1][(m >> 1) & 1] * s.w[2][(m >> 2) & 1] * s.w[3][(m >> 3) & 1];
+      if (wm == 0) continue;
+      nw[n] = wm;
+      cd[n][0] = 0, cd[n][1] = s.i[0][m & 1], cd[n][2] = s.i[1][(m >> 1) & 1], cd[n][3] = s.i[2][(m >> 2) & 1], cd[n][4] = s.i[3][(m >> 3) & 1];
+      ++n;
+    }
+  }
+  first[9] = int(n);
+  node_lrg_many(m_h, texel, cd, n, lrg);
   rgb[0] = rgb[1] = rgb[2] = 0;
   for (int k = 0; k < 9; ++k) {
     if (w[k] == 0) continue;
-    eval_stencil(m_h, texel, m_measured[pair[k]], v);
-    for (int c = 0; c < 3; ++c) rgb[c] += w[k] * v[c];
+    float acc[3] = {0, 0, 0}, v[3];
+    for (int j = first[k]; j < first[k + 1]; ++j) {
+      lrg_to_rgb(lrg[j], v);
+      for (int c = 0; c < 3; ++c) acc[c] += nw[j] * v[c];
+    }
+    for (int c = 0; c < 3; ++c) rgb[c] += w[k] * acc[c];
   }
 }
 
