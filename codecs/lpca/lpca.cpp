@@ -176,6 +176,85 @@ Status LpcaModel::eval_dir(int x, int y, const Vec3& wl, const Vec3& wv, float* 
   return {};
 }
 
+namespace {
+
+// acc[ch] += wt (p[0] + sum_i w[i] p[1 + i]) for each channel's run p of C + 1 table values, C a
+// constant where it is a common component count (a run-time count's loop was much of a query).
+template <int C>
+void pair_fixed(const float* e, const float* w, int nc, float wt, float* acc) {
+  for (int ch = 0; ch < nc; ++ch) {
+    const float* p = e + size_t(ch) * size_t(C + 1);
+    float s = p[0];
+    for (int i = 0; i < C; ++i) s += w[i] * p[1 + i];
+    acc[ch] += wt * s;
+  }
+}
+void pair_any(const float* e, const float* w, int c, int nc, float wt, float* acc) {
+  switch (c) {
+    case 1: return pair_fixed<1>(e, w, nc, wt, acc);
+    case 2: return pair_fixed<2>(e, w, nc, wt, acc);
+    case 4: return pair_fixed<4>(e, w, nc, wt, acc);
+    case 6: return pair_fixed<6>(e, w, nc, wt, acc);
+    case 8: return pair_fixed<8>(e, w, nc, wt, acc);
+    case 12: return pair_fixed<12>(e, w, nc, wt, acc);
+    case 16: return pair_fixed<16>(e, w, nc, wt, acc);
+    default: break;
+  }
+  for (int ch = 0; ch < nc; ++ch) {
+    const float* p = e + size_t(ch) * size_t(c + 1);
+    float s = p[0];
+    for (int i = 0; i < c; ++i) s += w[i] * p[1 + i];
+    acc[ch] += wt * s;
+  }
+}
+
+}  // namespace
+
+// Random queries (issue 24, `bench_eval`'s every-codec table): the generic loop ran eval_dir per
+// query, which located its two directions one call at a time and summed each pair through eval()
+// with a run-time component count. Here the directions are located in groups (weights_batch:
+// weights()'s bits) and each pair's channels are summed in a loop of fixed length where the
+// component count is a common one. The same terms as eval_dir in the same order.
+Status LpcaModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
+  BTFC_RETURN_IF_ERROR(check_eval_queries(m_desc, q));
+  const int nc = m_desc.channels, c = m_cfg.components;
+  if (nc > 64) return Model::eval_batch(q, out);  // eval_dir's own bound
+  const size_t c1 = size_t(c) + 1, cols = size_t(m_table.cols());
+  const float* table = eval_table();
+  constexpr size_t G = 256;
+  const long long groups = (long long)((q.size() + G - 1) / G);
+#pragma omp parallel for schedule(static)
+  for (long long g = 0; g < groups; ++g) {
+    const size_t i0 = size_t(g) * G, m = std::min(G, q.size() - i0);
+    Vec3 dl[G], dv[G];
+    DirWeights wa[G], wb[G];
+    uint32_t who[G];
+    size_t k = 0;
+    for (size_t j = 0; j < m; ++j) {
+      const EvalQuery& e = q[i0 + j];
+      if (e.light >= 0) eval(e.x, e.y, e.light, e.view, out + size_t(nc) * (i0 + j));
+      else dl[k] = e.wl, dv[k] = e.wv, who[k++] = uint32_t(j);
+    }
+    m_light_interp.weights_batch(dl, k, wa);
+    m_view_interp.weights_batch(dv, k, wb);
+    for (size_t j = 0; j < k; ++j) {
+      const EvalQuery& e = q[i0 + who[j]];
+      const size_t t = size_t(e.x) + size_t(m_desc.width) * size_t(e.y);
+      const float* base = table + size_t(m_cluster_of[t]) * cols * c1;
+      const float* w = m_weights.row(Index(t)).data();
+      float acc[64] = {0};
+      for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b) {
+          const float wt = wa[j].weight[size_t(a)] * wb[j].weight[size_t(b)];
+          if (wt == 0) continue;
+          pair_any(base + m_desc.row(size_t(wa[j].index[size_t(a)]), size_t(wb[j].index[size_t(b)]), 0) * c1, w, c, nc, wt, acc);
+        }
+      std::copy(acc, acc + nc, out + size_t(nc) * (i0 + who[j]));
+    }
+  }
+  return {};
+}
+
 Status LpcaModel::decode(const DecodeRequest& req, Btf& out) const {
   BTFC_ASSIGN_OR_RETURN(ResolvedRequest rr, resolve_request(m_desc, req));
   BTFC_RETURN_IF_ERROR(prepare_output(rr.desc, out));

@@ -31,6 +31,8 @@ class LpcaModel final : public Model {
   Status decode(const DecodeRequest& req, Btf& out) const override;
   void eval(int x, int y, int light, int view, float* out) const override;
   Status eval_dir(int x, int y, const Vec3& wl, const Vec3& wv, float* out) const override;
+  // eval_dir's values (to float round-off) without its per-call overheads: lpca.cpp says why.
+  Status eval_batch(std::span<const EvalQuery> q, float* out) const override;
   Result<std::vector<Tensor>> gpu_tensors() const override;
   Status attach_environment(const EnvironmentSH& env) override;  // relight.cpp
   // The PRT path of seed 002 (relight.cpp): equals Model::relight's quadrature for environments
