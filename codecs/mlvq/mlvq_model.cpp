@@ -90,15 +90,21 @@ void node_lrg(const Hierarchy& h, size_t texel, const int coord[5], float lrg[3]
   node_lrg_many(h, texel, reinterpret_cast<const int(*)[5]>(coord), 1, reinterpret_cast<float(*)[3]>(lrg));
 }
 
+// Bit m of the result: node m of the stencil (level k's index (m >> k) & 1) has four nonzero level
+// weights, the nodes eval_stencil sums.
+static unsigned live_nodes(const Stencil& s) {
+  constexpr unsigned k_half[4][2] = {{0x5555, 0xAAAA}, {0x3333, 0xCCCC}, {0x0F0F, 0xF0F0}, {0x00FF, 0xFF00}};
+  unsigned live = 0xFFFF;
+  for (int k = 0; k < 4; ++k) live &= (s.w[k][0] != 0 ? k_half[k][0] : 0u) | (s.w[k][1] != 0 ? k_half[k][1] : 0u);
+  return live;
+}
+
 void eval_stencil(const Hierarchy& h, size_t texel, const Stencil& s, float rgb[3]) {
   float acc[3] = {0, 0, 0}, v[3], lrg[3];
   // Only the nodes whose four level weights are all nonzero, in the same ascending order: a
   // measured pair's stencil is one node, and computing the other 15 products only to skip them
   // was the largest part of a random query (perf, `btfc bench -c mlvq`). Same sums, same bits.
-  constexpr unsigned k_half[4][2] = {{0x5555, 0xAAAA}, {0x3333, 0xCCCC}, {0x0F0F, 0xF0F0}, {0x00FF, 0xFF00}};
-  unsigned live = 0xFFFF;
-  for (int k = 0; k < 4; ++k) live &= (s.w[k][0] != 0 ? k_half[k][0] : 0u) | (s.w[k][1] != 0 ? k_half[k][1] : 0u);
-  for (; live; live &= live - 1) {
+  for (unsigned live = live_nodes(s); live; live &= live - 1) {
     const int m = __builtin_ctz(live);
     const float w = s.w[0][m & 1] * s.w[1][(m >> 1) & 1] * s.w[2][(m >> 2) & 1] * s.w[3][(m >> 3) & 1];
     if (w == 0) continue;
@@ -137,7 +143,6 @@ void MlvqModel::blend_measured(size_t texel, const Vec3& wl, const Vec3& wv, flo
   uint32_t pair[9];
   float w[9];
   dir_pairs(wl, wv, pair, w);
-  constexpr unsigned k_half[4][2] = {{0x5555, 0xAAAA}, {0x3333, 0xCCCC}, {0x0F0F, 0xF0F0}, {0x00FF, 0xFF00}};
   int cd[9 * 16][5];
   float nw[9 * 16], lrg[9 * 16][3];
   int first[10];
@@ -146,9 +151,7 @@ void MlvqModel::blend_measured(size_t texel, const Vec3& wl, const Vec3& wv, flo
     first[k] = int(n);
     if (w[k] == 0) continue;
     const Stencil& s = m_measured[pair[k]];
-    unsigned live = 0xFFFF;
-    for (int l = 0; l < 4; ++l) live &= (s.w[l][0] != 0 ? k_half[l][0] : 0u) | (s.w[l][1] != 0 ? k_half[l][1] : 0u);
-    for (; live; live &= live - 1) {
+    for (unsigned live = live_nodes(s); live; live &= live - 1) {
       const int m = __builtin_ctz(live);
       const float wm = s.w[0][m & 1] * s.w[1][(m >> 1) & 1] * s.w[2][(m >> 2) & 1] * s.w[3][(m >> 3) & 1];
       if (wm == 0) continue;
