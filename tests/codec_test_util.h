@@ -2,6 +2,10 @@
 #pragma once
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <vector>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -11,6 +15,55 @@
 #include "core/metrics.h"
 
 namespace btfc::test {
+
+// Random queries: theta up to 95 degrees (beyond every hull, a few below the horizon), some
+// measured, some runs of one direction pair (frames), texels anywhere.
+inline std::vector<EvalQuery> random_eval_queries(const BtfDesc& d, size_t n, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<EvalQuery> q(n);
+  for (size_t i = 0; i < n; ++i) {
+    EvalQuery& e = q[i];
+    e.x = int(rng() % unsigned(d.width)), e.y = int(rng() % unsigned(d.height));
+    const unsigned kind = rng() % 8;
+    if (kind == 0) {
+      e.light = int(rng() % d.num_lights()), e.view = int(rng() % d.num_views());
+    } else if (kind == 1 && i > 0 && q[i - 1].light < 0) {
+      e.wl = q[i - 1].wl, e.wv = q[i - 1].wv;  // same pair as the previous query
+    } else if (kind == 2) {
+      e.wl = d.lights.dirs[rng() % d.num_lights()], e.wv = d.views.dirs[rng() % d.num_views()];  // exactly measured
+    } else {
+      e.wl = dir_from_theta_phi(u(rng) * 95 * M_PI / 180, u(rng) * 2 * M_PI);
+      e.wv = dir_from_theta_phi(u(rng) * 95 * M_PI / 180, u(rng) * 2 * M_PI);
+    }
+  }
+  return q;
+}
+
+// eval_batch of `m` against eval / eval_dir per query on random_eval_queries(n, seed): the
+// largest difference relative to max(1, |reference|). Then one query outside the BTF: eval_batch
+// must fail naming it and write nothing.
+inline double eval_batch_vs_eval_dir(const Model& m, size_t n, unsigned seed) {
+  const BtfDesc& d = m.desc();
+  std::vector<EvalQuery> q = random_eval_queries(d, n, seed);
+  const size_t nc = size_t(d.channels);
+  std::vector<float> got(nc * n), ref(nc);
+  const Status st = m.eval_batch(q, got.data());
+  EXPECT_TRUE(st.ok()) << st.message();
+  double worst = 0;
+  for (size_t i = 0; i < n; ++i) {
+    if (q[i].light >= 0) m.eval(q[i].x, q[i].y, q[i].light, q[i].view, ref.data());
+    else EXPECT_TRUE(m.eval_dir(q[i].x, q[i].y, q[i].wl, q[i].wv, ref.data()).ok());
+    for (size_t c = 0; c < nc; ++c) worst = std::max(worst, std::abs(double(got[nc * i + c]) - ref[c]) / std::max(1.0, std::abs(double(ref[c]))));
+  }
+  q[n / 2].y = d.height;
+  std::fill(got.begin(), got.end(), -7.f);
+  const Status bad = m.eval_batch(q, got.data());
+  EXPECT_FALSE(bad.ok());
+  EXPECT_NE(bad.message().find("outside the BTF"), std::string::npos) << bad.message();
+  EXPECT_EQ(std::count(got.begin(), got.end(), -7.f), std::ptrdiff_t(got.size()));
+  return worst;
+}
 
 // Encodes `b` with the registry's codec for `spec` ("fmf:rank=8", parameters as the CLI takes
 // them) and Context::seed = `seed` (the default Context's). An unknown spec or a failed encode

@@ -18,6 +18,7 @@ using namespace btfc;
 namespace {
 
 using test::encode_spec;
+using test::random_eval_queries;
 
 Btf random_btf(const BtfDesc& d, unsigned seed) {
   Btf b = Btf::create(d).value();
@@ -38,30 +39,6 @@ DirectionSet first(const DirectionSet& s, size_t n) {
   out.dirs.resize(n);
   out.name = "custom";
   return out;
-}
-
-// Random queries: theta up to 95 degrees (beyond every hull, a few below the horizon), some
-// measured, some runs of one direction pair (frames), texels anywhere.
-std::vector<EvalQuery> queries(const BtfDesc& d, size_t n, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> u(0, 1);
-  std::vector<EvalQuery> q(n);
-  for (size_t i = 0; i < n; ++i) {
-    EvalQuery& e = q[i];
-    e.x = int(rng() % unsigned(d.width)), e.y = int(rng() % unsigned(d.height));
-    const unsigned kind = rng() % 8;
-    if (kind == 0) {
-      e.light = int(rng() % d.num_lights()), e.view = int(rng() % d.num_views());
-    } else if (kind == 1 && i > 0 && q[i - 1].light < 0) {
-      e.wl = q[i - 1].wl, e.wv = q[i - 1].wv;  // same pair as the previous query
-    } else if (kind == 2) {
-      e.wl = d.lights.dirs[rng() % d.num_lights()], e.wv = d.views.dirs[rng() % d.num_views()];  // exactly measured
-    } else {
-      e.wl = dir_from_theta_phi(u(rng) * 95 * M_PI / 180, u(rng) * 2 * M_PI);
-      e.wv = dir_from_theta_phi(u(rng) * 95 * M_PI / 180, u(rng) * 2 * M_PI);
-    }
-  }
-  return q;
 }
 
 // max |a - b| / max |b|
@@ -120,7 +97,7 @@ TEST(FmfEval, EveryKernelShapeMatchesTheReference) {
         const BtfDesc d = desc(13, 11, channels, L, V);
         auto m = encode_spec(random_btf(d, unsigned(rank + channels)), "fmf:rank=" + std::to_string(rank) + ":precision=" + precision);
         ASSERT_TRUE(m);
-        expect_fast_equals_reference(*m, queries(d, 3000, unsigned(rank)),
+        expect_fast_equals_reference(*m, random_eval_queries(d, 3000, unsigned(rank)),
                                      std::string(precision) + " channels " + std::to_string(channels) + " rank " + std::to_string(rank));
       }
 }
@@ -138,7 +115,7 @@ TEST(FmfEval, EveryBlendKernelThisCpuRunsMatchesTheReference) {
         const BtfDesc d = desc(9, 7, channels, L, V);
         auto m = encode_spec(random_btf(d, unsigned(rank * channels)), "fmf:rank=" + std::to_string(rank));
         ASSERT_TRUE(m);
-        expect_fast_equals_reference(*m, queries(d, 2000, unsigned(rank + 7)),
+        expect_fast_equals_reference(*m, random_eval_queries(d, 2000, unsigned(rank + 7)),
                                      "path " + std::to_string(int(path)) + " channels " + std::to_string(channels) + " rank " + std::to_string(rank));
       }
   }
@@ -151,7 +128,7 @@ TEST(FmfEval, BatchesOverSeveralBlocksAndFullDirectionSets) {
   const BtfDesc d = desc(16, 16, 3, DirectionSet::ubo2003(), DirectionSet::ubo2003());
   auto m = encode_spec(random_btf(d, 3), "fmf:rank=32");
   ASSERT_TRUE(m);
-  expect_fast_equals_reference(*m, queries(d, 3 * fmf::k_eval_block + 123, 9), "81 x 81, rank 32");
+  expect_fast_equals_reference(*m, random_eval_queries(d, 3 * fmf::k_eval_block + 123, 9), "81 x 81, rank 32");
   // A renderer's frames: every texel under one pair, three pairs.
   std::vector<EvalQuery> frames;
   for (int f = 0; f < 3; ++f)
@@ -198,7 +175,7 @@ TEST(FmfEval, DfmfPathMatchesTheReference) {
                         Case{&ldr, "fmf:color=dfmf:rank=20:offset=1e-5"}, Case{&hdr, "fmf:color=dfmf:rank=12"}}) {
     auto m = encode_spec(*c.b, c.spec);
     ASSERT_TRUE(m) << c.spec;
-    expect_fast_equals_reference(*m, queries(d, 9000, 3), c.spec);
+    expect_fast_equals_reference(*m, random_eval_queries(d, 9000, 3), c.spec);
   }
 }
 

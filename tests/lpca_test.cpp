@@ -537,38 +537,12 @@ TEST(Lpca, DecodeSubsetsAndEvalDirAgreeWithFullDecode) {
 
 TEST(Lpca, EvalBatchEqualsEvalDir) {
   // eval_batch's own path (component counts with a fixed-size loop and without) against eval_dir /
-  // eval per query, at random directions and measured indices in one batch; a query outside fails
-  // before anything is written.
+  // eval per query (tests/codec_test_util.h).
   Btf b = synth(9, 7, some_views({0, 5, 17, 40, 77}));
   for (const char* spec : {"lpca:clusters=2:components=3", "lpca:clusters=3:components=8", "lpca:clusters=1:components=1:precision=float"}) {
     auto m = encode(b, spec);
     ASSERT_TRUE(m) << spec;
-    std::mt19937 rng(9);
-    std::uniform_real_distribution<double> u(0, 1);
-    std::vector<EvalQuery> q(600);
-    for (size_t i = 0; i < q.size(); ++i) {
-      EvalQuery& e = q[i];
-      e.x = int(rng() % 9), e.y = int(rng() % 7);
-      if (i % 5 == 2) e.light = int(rng() % 81), e.view = int(rng() % 5);
-      e.wl = dir_from_theta_phi(u(rng) * 1.4, u(rng) * 6.283);
-      e.wv = dir_from_theta_phi(u(rng) * 1.4, u(rng) * 6.283);
-    }
-    std::vector<float> got(3 * q.size());
-    ASSERT_TRUE(m->eval_batch(q, got.data()).ok()) << spec;
-    double worst = 0;
-    for (size_t i = 0; i < q.size(); ++i) {
-      float ref[3];
-      if (q[i].light >= 0) m->eval(q[i].x, q[i].y, q[i].light, q[i].view, ref);
-      else ASSERT_TRUE(m->eval_dir(q[i].x, q[i].y, q[i].wl, q[i].wv, ref).ok());
-      for (int c = 0; c < 3; ++c) worst = std::max(worst, std::abs(double(got[3 * i + c]) - ref[c]) / std::max(1.0, std::abs(double(ref[c]))));
-    }
-    EXPECT_LT(worst, 1e-5) << spec;
-    q[300].y = -1;
-    std::fill(got.begin(), got.end(), -7.f);
-    const Status st = m->eval_batch(q, got.data());
-    EXPECT_FALSE(st.ok()) << spec;
-    EXPECT_NE(st.message().find("outside the BTF"), std::string::npos) << st.message();
-    EXPECT_EQ(std::count(got.begin(), got.end(), -7.f), std::ptrdiff_t(got.size())) << spec;
+    EXPECT_LT(test::eval_batch_vs_eval_dir(*m, 600, 9), 1e-5) << spec;  // float round-off
   }
 }
 

@@ -312,40 +312,13 @@ TEST(Lpyr, OddAndTinySizes) {
 
 TEST(Lpyr, EvalBatchEqualsEvalDir) {
   // eval_batch's own path (blended pairs, component counts with and without a fixed-size loop, a
-  // Phong mean, one level) against eval_dir / eval per query, at random directions (beyond the
-  // measured ones too) and measured indices in one batch; a query outside fails before anything is
-  // written.
+  // Phong mean, one level) against eval_dir / eval per query (tests/codec_test_util.h).
   const Btf b = random_btf(make_desc(13, 11, 9, 7), 8);
   for (const char* spec : {"lpyr:y=3:c=2:levels=2", "lpyr:y=5:c=1:precision=float:mean=phong:levels=3", "lpyr:y=16:c=4:levels=1",
                            "lpyr:y=8:c=2:levels=0"}) {
     auto m = encode(b, spec);
     ASSERT_TRUE(m) << spec;
-    std::mt19937 rng(3);
-    std::uniform_real_distribution<double> u(0, 1);
-    std::vector<EvalQuery> q(700);
-    for (size_t i = 0; i < q.size(); ++i) {
-      EvalQuery& e = q[i];
-      e.x = int(rng() % 13), e.y = int(rng() % 11);
-      if (i % 7 == 3) e.light = int(rng() % 9), e.view = int(rng() % 7);
-      e.wl = dir_from_theta_phi(u(rng) * 1.4, u(rng) * 6.283);
-      e.wv = dir_from_theta_phi(u(rng) * 1.4, u(rng) * 6.283);
-    }
-    std::vector<float> got(3 * q.size());
-    ASSERT_TRUE(m->eval_batch(q, got.data()).ok()) << spec;
-    double worst = 0;
-    for (size_t i = 0; i < q.size(); ++i) {
-      float ref[3];
-      if (q[i].light >= 0) m->eval(q[i].x, q[i].y, q[i].light, q[i].view, ref);
-      else ASSERT_TRUE(m->eval_dir(q[i].x, q[i].y, q[i].wl, q[i].wv, ref).ok());
-      for (int c = 0; c < 3; ++c) worst = std::max(worst, std::abs(double(got[3 * i + c]) - ref[c]) / std::max(1.0, std::abs(double(ref[c]))));
-    }
-    EXPECT_LT(worst, 1e-5) << spec;  // float round-off of another summation order
-    q[500].x = 13;
-    std::fill(got.begin(), got.end(), -7.f);
-    const Status st = m->eval_batch(q, got.data());
-    EXPECT_FALSE(st.ok()) << spec;
-    EXPECT_NE(st.message().find("outside the BTF"), std::string::npos) << st.message();
-    EXPECT_EQ(std::count(got.begin(), got.end(), -7.f), std::ptrdiff_t(got.size())) << spec;
+    EXPECT_LT(test::eval_batch_vs_eval_dir(*m, 700, 3), 1e-5) << spec;  // another summation order
   }
 }
 

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 
+#include "codecs/eval_grouped.h"
 #include "codecs/lpca/clustering.h"
 #include "codecs/lpca/lpca_model.h"
 #include "core/sh.h"
@@ -221,37 +222,19 @@ Status LpcaModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
   if (nc > 64) return Model::eval_batch(q, out);  // eval_dir's own bound
   const size_t c1 = size_t(c) + 1, cols = size_t(m_table.cols());
   const float* table = eval_table();
-  constexpr size_t G = 256;
-  const long long groups = (long long)((q.size() + G - 1) / G);
-#pragma omp parallel for schedule(static)
-  for (long long g = 0; g < groups; ++g) {
-    const size_t i0 = size_t(g) * G, m = std::min(G, q.size() - i0);
-    Vec3 dl[G], dv[G];
-    DirWeights wa[G], wb[G];
-    uint32_t who[G];
-    size_t k = 0;
-    for (size_t j = 0; j < m; ++j) {
-      const EvalQuery& e = q[i0 + j];
-      if (e.light >= 0) eval(e.x, e.y, e.light, e.view, out + size_t(nc) * (i0 + j));
-      else dl[k] = e.wl, dv[k] = e.wv, who[k++] = uint32_t(j);
-    }
-    m_light_interp.weights_batch(dl, k, wa);
-    m_view_interp.weights_batch(dv, k, wb);
-    for (size_t j = 0; j < k; ++j) {
-      const EvalQuery& e = q[i0 + who[j]];
-      const size_t t = size_t(e.x) + size_t(m_desc.width) * size_t(e.y);
-      const float* base = table + size_t(m_cluster_of[t]) * cols * c1;
-      const float* w = m_weights.row(Index(t)).data();
-      float acc[64] = {0};
-      for (int a = 0; a < 3; ++a)
-        for (int b = 0; b < 3; ++b) {
-          const float wt = wa[j].weight[size_t(a)] * wb[j].weight[size_t(b)];
-          if (wt == 0) continue;
-          pair_any(base + m_desc.row(size_t(wa[j].index[size_t(a)]), size_t(wb[j].index[size_t(b)]), 0) * c1, w, c, nc, wt, acc);
-        }
-      std::copy(acc, acc + nc, out + size_t(nc) * (i0 + who[j]));
-    }
-  }
+  eval_grouped(*this, m_light_interp, m_view_interp, q, out, [&](const EvalQuery& e, const DirWeights& wa, const DirWeights& wb, float* o) {
+    const size_t t = size_t(e.x) + size_t(m_desc.width) * size_t(e.y);
+    const float* base = table + size_t(m_cluster_of[t]) * cols * c1;
+    const float* w = m_weights.row(Index(t)).data();
+    float acc[64] = {0};
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) {
+        const float wt = wa.weight[size_t(a)] * wb.weight[size_t(b)];
+        if (wt == 0) continue;
+        pair_any(base + m_desc.row(size_t(wa.index[size_t(a)]), size_t(wb.index[size_t(b)]), 0) * c1, w, c, nc, wt, acc);
+      }
+    std::copy(acc, acc + nc, o);
+  });
   return {};
 }
 

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "codecs/eval_grouped.h"
 #include "codecs/lpyr/lpyr_internal.h"
 #include "core/fixed_product.h"
 #include "core/quant.h"
@@ -190,48 +191,30 @@ float blend_pairs(const float* d, const float* E, size_t C, const float* mean, c
 Status LpyrModel::eval_batch(std::span<const EvalQuery> q, float* out) const {
   BTFC_RETURN_IF_ERROR(check_eval_queries(m_desc, q));
   const size_t nl = m_desc.num_lights();
-  constexpr size_t G = 256;
-  const long long groups = (long long)((q.size() + G - 1) / G);
-#pragma omp parallel for schedule(static)
-  for (long long g = 0; g < groups; ++g) {
-    const size_t i0 = size_t(g) * G, m = std::min(G, q.size() - i0);
-    Vec3 dl[G], dv[G];
-    DirWeights wa[G], wb[G];
-    uint32_t who[G];
-    size_t k = 0;
-    for (size_t j = 0; j < m; ++j) {
-      const EvalQuery& e = q[i0 + j];
-      if (e.light >= 0) eval(e.x, e.y, e.light, e.view, out + 3 * (i0 + j));
-      else dl[k] = e.wl, dv[k] = e.wv, who[k++] = uint32_t(j);
-    }
-    m_light_interp.weights_batch(dl, k, wa);
-    m_view_interp.weights_batch(dv, k, wb);
-    for (size_t j = 0; j < k; ++j) {
-      const EvalQuery& e = q[i0 + who[j]];
-      size_t row[9];
-      float w[9];
-      int np = 0;
-      for (int a = 0; a < 3; ++a)
-        for (int b = 0; b < 3; ++b) {
-          const float ww = wa[j].weight[size_t(a)] * wb[j].weight[size_t(b)];
-          if (ww == 0) continue;
-          row[np] = size_t(wa[j].index[size_t(a)]) + nl * size_t(wb[j].index[size_t(b)]), w[np++] = ww;
-        }
-      float ycc[3];
-      for (int c = 0; c < 3; ++c) {
-        float acc = 0;
-        for (int lv = 0; lv <= lmax(); ++lv) {
-          const Level& l = m_levels[size_t(lv)];
-          const Block& b = l.ch[c];
-          const size_t C = size_t(b.E.cols());
-          const float* d = b.D.data() + (size_t(e.x >> lv) + size_t(l.size.w) * size_t(e.y >> lv)) * C;
-          acc += blend_pairs(d, b.E.data(), C, b.mean.size() ? b.mean.data() : nullptr, row, w, np);
-        }
-        ycc[c] = acc;
+  eval_grouped(*this, m_light_interp, m_view_interp, q, out, [&](const EvalQuery& e, const DirWeights& wa, const DirWeights& wb, float* o) {
+    size_t row[9];
+    float w[9];
+    int np = 0;
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) {
+        const float ww = wa.weight[size_t(a)] * wb.weight[size_t(b)];
+        if (ww == 0) continue;
+        row[np] = size_t(wa.index[size_t(a)]) + nl * size_t(wb.index[size_t(b)]), w[np++] = ww;
       }
-      ycbcr_to_rgb(ycc, out + 3 * (i0 + who[j]));
+    float ycc[3];
+    for (int c = 0; c < 3; ++c) {
+      float acc = 0;
+      for (int lv = 0; lv <= lmax(); ++lv) {
+        const Level& l = m_levels[size_t(lv)];
+        const Block& b = l.ch[c];
+        const size_t C = size_t(b.E.cols());
+        const float* d = b.D.data() + (size_t(e.x >> lv) + size_t(l.size.w) * size_t(e.y >> lv)) * C;
+        acc += blend_pairs(d, b.E.data(), C, b.mean.size() ? b.mean.data() : nullptr, row, w, np);
+      }
+      ycc[c] = acc;
     }
-  }
+    ycbcr_to_rgb(ycc, o);
+  });
   return {};
 }
 
