@@ -54,8 +54,9 @@ const std::shared_ptr<Btf>& PyBtf::live() const {
 }
 
 py::array values_view(const PyBtf& b) {
-  const BtfDesc& d = b.live()->desc();
-  auto* owner = new std::shared_ptr<Btf>(b.live());
+  const std::shared_ptr<Btf>& btf = b.live();
+  const BtfDesc& d = btf->desc();
+  auto* owner = new std::shared_ptr<Btf>(btf);
   py::capsule base(owner, [](void* p) { delete static_cast<std::shared_ptr<Btf>*>(p); });
   const std::vector<py::ssize_t> shape{d.height, d.width, py::ssize_t(d.num_views()), py::ssize_t(d.num_lights()), d.channels};
   std::vector<py::ssize_t> strides(5);
@@ -64,7 +65,7 @@ py::array values_view(const PyBtf& b) {
     strides[size_t(i)] = s;
     s *= shape[size_t(i)];
   }
-  return py::array_t<float>(shape, strides, b.live()->data(), base);
+  return py::array_t<float>(shape, strides, btf->data(), base);
 }
 
 py::array directions_array(const DirectionSet& set) {
@@ -154,16 +155,17 @@ void bind_btf(py::module_& m) {
       .def(
           "image",
           [](const PyBtf& b, int light, int view) {
-            const BtfDesc& d = b.live()->desc();
+            const std::shared_ptr<Btf>& btf = b.live();
+            const BtfDesc& d = btf->desc();
             if (light < 0 || size_t(light) >= d.num_lights() || view < 0 || size_t(view) >= d.num_views())
               throw_status(invalid_argument("image: light " + std::to_string(light) + ", view " + std::to_string(view) + " outside " +
                                             std::to_string(d.num_lights()) + " lights x " + std::to_string(d.num_views()) + " views"));
             // data[:, :, view, light, :] as its own strided view of the buffer.
-            auto* owner = new std::shared_ptr<Btf>(b.live());
+            auto* owner = new std::shared_ptr<Btf>(btf);
             py::capsule base(owner, [](void* p) { delete static_cast<std::shared_ptr<Btf>*>(p); });
             const py::ssize_t f = sizeof(float), texel = py::ssize_t(d.abrdf_size()) * f;
             return py::array_t<float>({py::ssize_t(d.height), py::ssize_t(d.width), py::ssize_t(d.channels)},
-                                      {texel * d.width, texel, f}, b.live()->data() + d.row(size_t(light), size_t(view), 0), base);
+                                      {texel * d.width, texel, f}, btf->data() + d.row(size_t(light), size_t(view), 0), base);
           },
           py::arg("light"), py::arg("view"), "One (light, view) image, (height, width, channels): a strided view.")
       .def(
@@ -172,8 +174,9 @@ void bind_btf(py::module_& m) {
             ImageFormat f = ImageFormat::exr;
             if (image_format == "png") f = ImageFormat::png;
             else if (image_format != "exr") throw_status(invalid_argument("save: image_format must be 'exr' or 'png'"));
+            const std::shared_ptr<Btf>& btf = b.live();  // with the GIL: it may raise
             py::gil_scoped_release nogil;
-            check(write_btf(*b.live(), path, f));
+            check(write_btf(*btf, path, f));
           },
           py::arg("path"), py::arg("image_format") = "exr",
           "Writes the raw BTF: a .btfc container, or else an image-set directory (UBO2003 names).")

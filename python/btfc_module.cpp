@@ -246,9 +246,10 @@ PYBIND11_MODULE(btfc, m) {
       "compare",
       [](const PyBtf& a, const PyBtf& b, bool ssim) {
         Result<Metrics> r = unsupported("compare");
+        const std::shared_ptr<Btf>&ra = a.live(), &rb = b.live();  // with the GIL: they may raise
         {
           py::gil_scoped_release nogil;
-          r = compare_btf(*a.live(), *b.live(), ssim);
+          r = compare_btf(*ra, *rb, ssim);
         }
         return metrics_dict(unwrap(std::move(r)));
       },
@@ -261,6 +262,7 @@ PYBIND11_MODULE(btfc, m) {
       [](const PyBtf& btf, const py::object& specs, bool renders, uint64_t seed, size_t throughput_queries, const std::string& label,
          const py::object& progress) {
         const std::vector<std::string> list = spec_list(specs);
+        const std::shared_ptr<Btf>& input = btf.live();  // with the GIL: it may raise
         ProgressBridge bridge(progress);
         std::vector<RgbImage> refs;
         py::list rows;
@@ -268,7 +270,7 @@ PYBIND11_MODULE(btfc, m) {
           Result<std::vector<RgbImage>> r = unsupported("bench");
           {
             py::gil_scoped_release nogil;
-            r = reference_renders(*btf.live());
+            r = reference_renders(*input);
           }
           refs = unwrap(std::move(r));
         }
@@ -282,7 +284,7 @@ PYBIND11_MODULE(btfc, m) {
           Result<BenchResult> r = unsupported("bench");
           {
             py::gil_scoped_release nogil;
-            r = run_benchmark(*btf.live(), spec, opt);
+            r = run_benchmark(*input, spec, opt);
           }
           bridge.rethrow();
           rows.append(bench_row(label, unwrap(std::move(r)), renders));

@@ -179,33 +179,29 @@ Status LpcaModel::eval_dir(int x, int y, const Vec3& wl, const Vec3& wv, float* 
 
 namespace {
 
-// acc[ch] += wt (p[0] + sum_i w[i] p[1 + i]) for each channel's run p of C + 1 table values, C a
-// constant where it is a common component count (a run-time count's loop was much of a query).
+// acc[ch] += wt (p[0] + sum_i w[i] p[1 + i]) for each channel's run p of c + 1 table values; C is
+// c as a constant for the common component counts (a run-time count's loop was much of a
+// query), 0 for any other count.
 template <int C>
-void pair_fixed(const float* e, const float* w, int nc, float wt, float* acc) {
+void pair_fixed(const float* e, const float* w, int c, int nc, float wt, float* acc) {
+  const int n = C > 0 ? C : c;
   for (int ch = 0; ch < nc; ++ch) {
-    const float* p = e + size_t(ch) * size_t(C + 1);
+    const float* p = e + size_t(ch) * size_t(n + 1);
     float s = p[0];
-    for (int i = 0; i < C; ++i) s += w[i] * p[1 + i];
+    for (int i = 0; i < n; ++i) s += w[i] * p[1 + i];
     acc[ch] += wt * s;
   }
 }
 void pair_any(const float* e, const float* w, int c, int nc, float wt, float* acc) {
   switch (c) {
-    case 1: return pair_fixed<1>(e, w, nc, wt, acc);
-    case 2: return pair_fixed<2>(e, w, nc, wt, acc);
-    case 4: return pair_fixed<4>(e, w, nc, wt, acc);
-    case 6: return pair_fixed<6>(e, w, nc, wt, acc);
-    case 8: return pair_fixed<8>(e, w, nc, wt, acc);
-    case 12: return pair_fixed<12>(e, w, nc, wt, acc);
-    case 16: return pair_fixed<16>(e, w, nc, wt, acc);
-    default: break;
-  }
-  for (int ch = 0; ch < nc; ++ch) {
-    const float* p = e + size_t(ch) * size_t(c + 1);
-    float s = p[0];
-    for (int i = 0; i < c; ++i) s += w[i] * p[1 + i];
-    acc[ch] += wt * s;
+    case 1: return pair_fixed<1>(e, w, c, nc, wt, acc);
+    case 2: return pair_fixed<2>(e, w, c, nc, wt, acc);
+    case 4: return pair_fixed<4>(e, w, c, nc, wt, acc);
+    case 6: return pair_fixed<6>(e, w, c, nc, wt, acc);
+    case 8: return pair_fixed<8>(e, w, c, nc, wt, acc);
+    case 12: return pair_fixed<12>(e, w, c, nc, wt, acc);
+    case 16: return pair_fixed<16>(e, w, c, nc, wt, acc);
+    default: return pair_fixed<0>(e, w, c, nc, wt, acc);
   }
 }
 

@@ -141,16 +141,17 @@ Status LpyrModel::eval_dir(int x, int y, const Vec3& wl, const Vec3& wv, float* 
 
 namespace {
 
-// sum_p w[p] (d . E.row(row[p]) + mean[row[p]]) over a level's C components (mean may be null),
-// C a constant where it is one of the small counts lpyr's levels have: with a run-time count
-// GCC's loop of 2-8 values was most of a query (perf).
+// sum_p w[p] (d . E.row(row[p]) + mean[row[p]]) over a level's c components (mean may be null);
+// C is c as a constant for the small counts lpyr's levels have (with a run-time count GCC's loop
+// of 2-8 values was most of a query, perf), 0 for any other count.
 template <int C>
-float blend_fixed(const float* d, const float* E, const float* mean, const size_t* row, const float* w, int np) {
+float blend_fixed(const float* d, const float* E, size_t c, const float* mean, const size_t* row, const float* w, int np) {
+  const size_t n = C > 0 ? size_t(C) : c;
   float acc = 0;
   for (int p = 0; p < np; ++p) {
-    const float* er = E + row[p] * size_t(C);
+    const float* er = E + row[p] * n;
     float v = 0;
-    for (int i = 0; i < C; ++i) v += d[i] * er[i];
+    for (size_t i = 0; i < n; ++i) v += d[i] * er[i];
     if (mean) v += mean[row[p]];
     acc += w[p] * v;
   }
@@ -158,25 +159,16 @@ float blend_fixed(const float* d, const float* E, const float* mean, const size_
 }
 float blend_pairs(const float* d, const float* E, size_t C, const float* mean, const size_t* row, const float* w, int np) {
   switch (C) {
-    case 1: return blend_fixed<1>(d, E, mean, row, w, np);
-    case 2: return blend_fixed<2>(d, E, mean, row, w, np);
-    case 3: return blend_fixed<3>(d, E, mean, row, w, np);
-    case 4: return blend_fixed<4>(d, E, mean, row, w, np);
-    case 6: return blend_fixed<6>(d, E, mean, row, w, np);
-    case 8: return blend_fixed<8>(d, E, mean, row, w, np);
-    case 12: return blend_fixed<12>(d, E, mean, row, w, np);
-    case 16: return blend_fixed<16>(d, E, mean, row, w, np);
-    default: break;
+    case 1: return blend_fixed<1>(d, E, C, mean, row, w, np);
+    case 2: return blend_fixed<2>(d, E, C, mean, row, w, np);
+    case 3: return blend_fixed<3>(d, E, C, mean, row, w, np);
+    case 4: return blend_fixed<4>(d, E, C, mean, row, w, np);
+    case 6: return blend_fixed<6>(d, E, C, mean, row, w, np);
+    case 8: return blend_fixed<8>(d, E, C, mean, row, w, np);
+    case 12: return blend_fixed<12>(d, E, C, mean, row, w, np);
+    case 16: return blend_fixed<16>(d, E, C, mean, row, w, np);
+    default: return blend_fixed<0>(d, E, C, mean, row, w, np);
   }
-  float acc = 0;
-  for (int p = 0; p < np; ++p) {
-    const float* er = E + row[p] * C;
-    float v = 0;
-    for (size_t i = 0; i < C; ++i) v += d[i] * er[i];
-    if (mean) v += mean[row[p]];
-    acc += w[p] * v;
-  }
-  return acc;
 }
 
 }  // namespace
