@@ -42,9 +42,6 @@ namespace {
 
 constexpr double k_rel_sigma_floor = 1e-6;  // float data: smaller singular values are noise
 
-// All eigenpairs, sorted by descending eigenvalue.
-void sorted_eigen(const MatrixXd& G, Eigen::VectorXd& lambda, MatrixXd& vecs) { top_eigenpairs(G, G.rows(), lambda, vecs); }
-
 double frobenius2(ConstMapF& B) { return squared_norm(B.data(), size_t(B.size())); }
 
 // ExactSvdReuse's store: the eigendecompositions of the last few Gram matrices, by fingerprint.
@@ -59,6 +56,9 @@ int g_reuse_scopes = 0;
 size_t g_reuses = 0;
 std::list<GramEigen> g_reuse;  // most recent first
 constexpr size_t k_reuse_entries = 3;  // dfmf factorizes three channel matrices per encode
+
+// All eigenpairs, sorted by descending eigenvalue (the power scheme's small Rayleigh-Ritz step).
+void sorted_eigen(const MatrixXd& G, Eigen::VectorXd& lambda, MatrixXd& vecs) { top_eigenpairs(G, G.rows(), lambda, vecs); }
 
 // A 64-bit fingerprint of every value (as bits), in parallel blocks: ~0.05 s for 300 MB.
 uint64_t fingerprint(ConstMapF& B) {
@@ -82,30 +82,28 @@ uint64_t fingerprint(ConstMapF& B) {
 }
 
 // The eigendecomposition of the smaller Gram matrix (B B^T when rows_small, else B^T B), in
-// double, eigenvalues descending.
+// double, eigenvalues descending. Either Gram is summed by symmetric rank updates (BLAS dsyrk) of
+// double blocks of B: column blocks for B B^T, row blocks for B^T B (dsyrk on the transpose).
 void gram_eigen(ConstMapF& B, bool rows_small, const SvdOptions& opt, Eigen::VectorXd& lambda, MatrixXd& E) {
-  const Index n = B.cols(), k = rows_small ? B.rows() : n;
-  // B B^T is accumulated over column blocks so no double copy of B exists. B^T B (n < m: fewer
-  // texels than rows) uses one double copy of B: 2x the input, 645 MB for the 64 x 64 textile,
-  // whose ranks above 1/8 of its 4096 texels now take this path.
+  const Index m = B.rows(), n = B.cols(), k = rows_small ? m : n, len = rows_small ? n : m;
   MatrixXd G = MatrixXd::Zero(k, k);
-  const Index block = 4096;
+  const Index block = exact_double_block(k);
   // One step per Gram block, one for the eigendecomposition, one for the projection.
-  if (opt.progress) opt.progress->start("fmf exact SVD", uint64_t((n + block - 1) / block) + 2);
-  if (rows_small) {
-    for (Index j0 = 0; j0 < n; j0 += block) {
-      const Index nb = std::min(block, n - j0);
-      MatrixXd Bd = B.middleCols(j0, nb).cast<double>();
+  if (opt.progress) opt.progress->start("fmf exact SVD", uint64_t((len + block - 1) / block) + 2);
+  MatrixXd Bd;
+  for (Index j0 = 0; j0 < len; j0 += block) {
+    const Index nb = std::min(block, len - j0);
+    if (rows_small) {
+      Bd = B.middleCols(j0, nb).cast<double>();
       G.selfadjointView<Eigen::Lower>().rankUpdate(Bd);
-      if (opt.progress) opt.progress->advance();
+    } else {
+      Bd = B.middleRows(j0, nb).cast<double>();  // copied column by column: no strided transpose
+      G.selfadjointView<Eigen::Lower>().rankUpdate(Bd.transpose());
     }
-    G.triangularView<Eigen::StrictlyUpper>() = G.transpose();
-  } else {
-    MatrixXd Bd = B.cast<double>();
-    G.noalias() = Bd.transpose() * Bd;
-    if (opt.progress) opt.progress->advance((n + block - 1) / block);
+    if (opt.progress) opt.progress->advance();
   }
-  sorted_eigen(G, lambda, E);
+  G.triangularView<Eigen::StrictlyUpper>() = G.transpose();
+  top_eigenpairs(G, k, lambda, E, k_exact_lapack_eigen_from);
   if (opt.progress) opt.progress->advance();
 }
 
@@ -153,19 +151,32 @@ Result<SvdResult> exact_svd(ConstMapF& B, const SvdOptions& opt) {
   const int rank = choose_rank(lambda, r.total_energy, opt, r.data_rank_limit, r.target_reached);
   r.S = lambda.head(rank).cwiseSqrt();
   r.kept_energy = lambda.head(rank).sum();
+  // The projections in double blocks of B as the Gram (BLAS dgemm; a product with B's cast
+  // expression ran Eigen's own unblocked kernel).
+  const Index block = exact_double_block(rows_small ? m : n);
+  MatrixXd Bd;
   if (rows_small) {
     // U = top eigenvectors of B B^T; SxV = B^T U is the projection (no division by sigma).
-    MatrixXd U = E.leftCols(rank);
-    MatrixXd SxV = B.cast<double>().transpose() * U;
+    const MatrixXd U = E.leftCols(rank);
     r.U = U.cast<float>();
-    r.SxV = SxV.cast<float>();
+    r.SxV.resize(n, rank);
+    for (Index j0 = 0; j0 < n; j0 += block) {
+      const Index nb = std::min(block, n - j0);
+      Bd = B.middleCols(j0, nb).cast<double>();
+      r.SxV.middleRows(j0, nb) = (Bd.transpose() * U).cast<float>();
+    }
   } else {
     // V = top eigenvectors of B^T B; U = B V / sigma; SxV = V sigma. Kept sigma > floor > 0,
     // except for all-zero input, where U is left zero.
-    MatrixXd V = E.leftCols(rank);
-    MatrixXd U = B.cast<double>() * V;
-    for (int c = 0; c < rank; ++c) U.col(c) *= r.S(c) > 0 ? 1.0 / r.S(c) : 0.0;
-    r.U = U.cast<float>();
+    const MatrixXd V = E.leftCols(rank);
+    Eigen::VectorXd inv(rank);
+    for (int c = 0; c < rank; ++c) inv(c) = r.S(c) > 0 ? 1.0 / r.S(c) : 0.0;
+    r.U.resize(m, rank);
+    for (Index i0 = 0; i0 < m; i0 += block) {
+      const Index mb = std::min(block, m - i0);
+      Bd = B.middleRows(i0, mb).cast<double>();
+      r.U.middleRows(i0, mb) = ((Bd * V) * inv.asDiagonal()).cast<float>();
+    }
     r.SxV = (V * r.S.asDiagonal()).cast<float>();
   }
   if (opt.progress) opt.progress->finish();
@@ -604,6 +615,10 @@ Result<SvdResult> randomized_svd(ConstMapF& B, const SvdOptions& opt) {
 
 }  // namespace
 
+// No double copy of B exists (B^T B once copied all of it: 3.4 x the input's peak memory, and
+// page faults were most of the encode of a 32 x 32 texel BTF).
+Index exact_double_block(Index len) { return Index(std::clamp<Index>((Index(32) << 20) / 8 / std::max<Index>(len, 1), 1, 4096)); }
+
 int choose_rank(const Eigen::VectorXd& lambda, double total, const SvdOptions& opt, int& data_rank, bool& reached) {
   const Index k = lambda.size();
   const double floor = lambda.size() ? lambda(0) * k_rel_sigma_floor * k_rel_sigma_floor : 0;
@@ -621,12 +636,6 @@ int choose_rank(const Eigen::VectorXd& lambda, double total, const SvdOptions& o
   }
   return std::max(rank, 1);
 }
-
-// From this size on top_eigenpairs asks LAPACK (dsyevd): Eigen's solver (unblocked Householder
-// tridiagonalization and implicit QL) took minutes at k = 4096, LAPACK's divide and conquer
-// seconds. Smaller matrices keep Eigen's solver, so every model of a smaller Gram matrix (every
-// default setting) is what it was, bit for bit.
-constexpr Index k_lapack_eigen_from = 1025;
 
 namespace {
 
@@ -652,10 +661,10 @@ bool lapack_eigen(const MatrixXd& G, Eigen::VectorXd& w, MatrixXd& A) {
 
 }  // namespace
 
-void top_eigenpairs(const MatrixXd& G, Index l, Eigen::VectorXd& lambda, MatrixXd& vecs) {
+void top_eigenpairs(const MatrixXd& G, Index l, Eigen::VectorXd& lambda, MatrixXd& vecs, Index lapack_from) {
   const Index k = G.rows();
 #ifdef BTFC_HAVE_OPENBLAS
-  if (k >= k_lapack_eigen_from) {
+  if (k >= lapack_from) {
     Eigen::VectorXd w;
     MatrixXd A;
     if (lapack_eigen(G, w, A)) {

@@ -85,7 +85,20 @@ struct SvdResult {
 
 // The top `l` eigenpairs (eigenvalues descending, clamped at 0) of a symmetric PSD matrix, in
 // double; l <= G.rows(). Shared by the exact SVD path and lpca's per-cluster PCA.
-void top_eigenpairs(const Eigen::MatrixXd& G, Eigen::Index l, Eigen::VectorXd& lambda, Eigen::MatrixXd& vecs);
+// From `lapack_from` rows on it asks LAPACK's divide and conquer (dsyevd, where btfc links
+// OpenBLAS); below, Eigen's solver (unblocked Householder tridiagonalization and implicit QL:
+// minutes at 4096, and at 768 a third of a small BTF's encode where dsyevd takes a few
+// hundredths). The default keeps Eigen's solver, whose bits lpca's models and the randomized
+// paths' small Rayleigh-Ritz steps have always had; the exact SVD (in core and streamed) takes
+// LAPACK from k_exact_lapack_eigen_from on.
+constexpr Eigen::Index k_lapack_eigen_from = 1025;
+constexpr Eigen::Index k_exact_lapack_eigen_from = 128;
+void top_eigenpairs(const Eigen::MatrixXd& G, Eigen::Index l, Eigen::VectorXd& lambda, Eigen::MatrixXd& vecs,
+                    Eigen::Index lapack_from = k_lapack_eigen_from);
+
+// How many columns (or rows) of length `len` the exact path converts to double at a time for
+// its Gram sums and projections: at most 4096 and at most 32 MiB of double. In core and streamed.
+Eigen::Index exact_double_block(Eigen::Index len);
 
 // How many of the descending eigenvalues `lambda` (sigma^2) of a matrix with energy `total`
 // (||B||_F^2) to keep: at most opt.max_rank and the numerical rank (sigma > 1e-6 sigma_max),

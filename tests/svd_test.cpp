@@ -498,6 +498,59 @@ TEST(Svd, LargeGramEigenpairsEqualEigensSolver) {
   for (int i = 1; i < 30; ++i) EXPECT_GE(lambda(i - 1), lambda(i));
 }
 
+TEST(Svd, ExactPathInDoubleBlocksMatchesTheSpectrumOnBothSides) {
+  // B = X diag(d) Y^T with Gaussian X (m x 40), Y (n x 40): its singular values are those of the
+  // 40 x 40 core Rx diag(d) Ry^T (X = Qx Rx, Y = Qy Ry), in double. Sizes with several double
+  // blocks of B (exact_double_block) on each Gram side, and Grams of 300 and 600 rows: LAPACK's
+  // solver (k_exact_lapack_eigen_from). The kept spectrum, U's orthonormality and the error of
+  // U SxV^T match the core's to float rounding.
+  for (auto [m, n] : {std::pair<size_t, size_t>{16000, 600}, {300, 9000}}) {
+    const Eigen::Index k = Eigen::Index(std::min(m, n)), len = Eigen::Index(std::max(m, n));
+    ASSERT_GE(k, k_exact_lapack_eigen_from);
+    ASSERT_GT(len, 2 * exact_double_block(k)) << "at least three blocks";
+    std::mt19937_64 rng(11);
+    std::normal_distribution<double> g(0.0, 1.0);
+    Eigen::MatrixXd X(Eigen::Index(m), 40), Y(Eigen::Index(n), 40);
+    for (Eigen::Index i = 0; i < X.size(); ++i) X.data()[i] = g(rng);
+    for (Eigen::Index i = 0; i < Y.size(); ++i) Y.data()[i] = g(rng);
+    Eigen::VectorXd d(40);
+    for (int i = 0; i < 40; ++i) d(i) = std::pow(0.85, i);
+    const Eigen::MatrixXf Bf = (X * d.asDiagonal() * Y.transpose()).cast<float>();
+    const Eigen::MatrixXd Rx = Eigen::HouseholderQR<Eigen::MatrixXd>(X).matrixQR().topRows(40).triangularView<Eigen::Upper>();
+    const Eigen::MatrixXd Ry = Eigen::HouseholderQR<Eigen::MatrixXd>(Y).matrixQR().topRows(40).triangularView<Eigen::Upper>();
+    const Eigen::VectorXd s = Eigen::JacobiSVD<Eigen::MatrixXd>(Rx * d.asDiagonal() * Ry.transpose()).singularValues();
+    SvdOptions o;
+    o.max_rank = 12;
+    o.method = SvdMethod::exact;
+    auto r = truncated_svd(Bf.data(), m, n, o);
+    ASSERT_TRUE(r.ok()) << r.status().message();
+    EXPECT_EQ(r->method, "exact");
+    ASSERT_EQ(r->S.size(), 12);
+    for (int i = 0; i < 12; ++i) EXPECT_NEAR(r->S(i) / s(i), 1.0, 1e-5) << m << " x " << n << ", sigma " << i;
+    const Eigen::MatrixXf UtU = r->U.transpose() * r->U;
+    EXPECT_LT((UtU - Eigen::MatrixXf::Identity(12, 12)).cwiseAbs().maxCoeff(), 1e-4);
+    const double tail = s.tail(28).squaredNorm(), err = (Bf - r->U * r->SxV.transpose()).cast<double>().squaredNorm();
+    EXPECT_NEAR(err / tail, 1.0, 1e-3) << m << " x " << n;
+  }
+}
+
+TEST(Svd, ExactThresholdTakesLapackForModerateGrams) {
+  // The exact path's solver from k_exact_lapack_eigen_from rows on: dsyevd against Eigen's
+  // solver on a 200 x 200 Gram matrix, as LargeGramEigenpairsEqualEigensSolver at 1100.
+  const Eigen::Index k = 200;
+  const std::vector<float> b = test_matrix(size_t(k), 500, 30, 9);
+  Eigen::Map<const Eigen::MatrixXf> B(b.data(), k, 500);
+  const Eigen::MatrixXd G = B.cast<double>() * B.cast<double>().transpose();
+  Eigen::VectorXd lambda, lambda_eigen;
+  Eigen::MatrixXd vecs, vecs_eigen;
+  top_eigenpairs(G, 20, lambda, vecs, k_exact_lapack_eigen_from);
+  top_eigenpairs(G, 20, lambda_eigen, vecs_eigen);  // the default threshold: Eigen's solver at 200
+  for (int i = 0; i < 20; ++i) {
+    EXPECT_NEAR(lambda(i), lambda_eigen(i), 1e-12 * lambda_eigen(0)) << i;
+    EXPECT_NEAR(std::abs(vecs.col(i).dot(vecs_eigen.col(i))), 1.0, 1e-9) << i;
+  }
+}
+
 TEST(Svd, AutomaticPathIsExactForLargeRanksOfAModerateSide) {
   const size_t m = 1300, n = 1100;  // small side 1100: randomized at rank 32, exact from rank 122
   const std::vector<float> b = test_matrix(m, n, 60, 4);

@@ -19,17 +19,14 @@ using Eigen::Index;
 using Eigen::MatrixXd;
 using Eigen::MatrixXf;
 
-// Columns of B converted to double at a time for the Gram update: at most 4096 (as in core)
-// and at most 32 MiB of double, so a chunk never needs a double copy of itself.
-Index gram_block_columns(uint64_t m) { return Index(std::clamp<uint64_t>((uint64_t(32) << 20) / 8 / std::max<uint64_t>(m, 1), 1, 4096)); }
-
 }  // namespace
 
 uint64_t streaming_exact_bytes(uint64_t m) {
-  // G, the solver's eigenvector matrix and the sorted copy top_eigenpairs returns are alive
-  // together (3 m^2 doubles; the sum buffer, half a Gram, is freed before the solver runs),
-  // plus one double column block.
-  return 3 * m * m * 8 + m * uint64_t(gram_block_columns(m)) * 8;
+  // G, LAPACK's copy of it (overwritten by the eigenvectors), dsyevd's workspace (2 m^2 + 6 m)
+  // and the sorted copy top_eigenpairs returns are alive together (5 m^2 doubles; Eigen's solver,
+  // below k_exact_lapack_eigen_from, holds less; the sum buffer, half a Gram, is freed before the
+  // solver runs), plus one double column block.
+  return (5 * m * m + 6 * m) * 8 + m * uint64_t(exact_double_block(m)) * 8;
 }
 
 Result<SvdResult> streaming_exact_svd(const ChunkSource& src, const std::vector<size_t>& chunks, const SvdOptions& opt, Collective& coll,
@@ -39,7 +36,7 @@ Result<SvdResult> streaming_exact_svd(const ChunkSource& src, const std::vector<
   if (opt.max_rank < 1) return invalid_argument("SVD rank must be >= 1");
   PassRunner run(src, chunks, coll, opt.progress, "fmf out-of-core exact SVD", 2);
   std::vector<double>& buf = run.sums();
-  const Index M = Index(m), block = gram_block_columns(m);
+  const Index M = Index(m), block = exact_double_block(m);
   const size_t tri = m * (m + 1) / 2;  // the lower triangle is what the processes sum
 
   // Pass 1: G = sum_c B_c B_c^T (lower triangle) and ||B||_F^2, in double.
@@ -68,7 +65,7 @@ Result<SvdResult> streaming_exact_svd(const ChunkSource& src, const std::vector<
   BTFC_RETURN_IF_ERROR(src.finish_first_pass(coll));  // e.g. a raw .btfc's CRC, joined over processes
 
   MatrixXd E;
-  SvdResult r = spectrum_of(G, M, energy, opt, "exact (streamed)", E);
+  SvdResult r = spectrum_of(G, M, energy, opt, "exact (streamed)", E, k_exact_lapack_eigen_from);
   G.resize(0, 0);
   const Index rank = r.S.size();
   r.U = E.leftCols(rank).cast<float>();

@@ -114,9 +114,10 @@ void PassRunner::release() {
   std::vector<double>().swap(m_buf);
 }
 
-SvdResult spectrum_of(const Eigen::MatrixXd& G, Eigen::Index l, double energy, const SvdOptions& opt, const char* method, Eigen::MatrixXd& E) {
+SvdResult spectrum_of(const Eigen::MatrixXd& G, Eigen::Index l, double energy, const SvdOptions& opt, const char* method, Eigen::MatrixXd& E,
+                      Eigen::Index lapack_from) {
   Eigen::VectorXd lambda;
-  top_eigenpairs(G, l, lambda, E);
+  top_eigenpairs(G, l, lambda, E, lapack_from);
   SvdResult r;
   r.method = method;
   r.requested_rank = opt.max_rank;

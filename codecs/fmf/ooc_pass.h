@@ -66,7 +66,9 @@ class PassRunner {
 // The small eigenproblem every streamed SVD ends with: the top l eigenpairs of the (l x l or
 // rows x rows) Gram matrix G, the rank choice (choose_rank: max_rank, target_error, the data's
 // rank), S and the energies, in an SvdResult named `method`; E gets the eigenvectors, largest
-// first, from which the caller makes U. The rank is r.S.size().
-SvdResult spectrum_of(const Eigen::MatrixXd& G, Eigen::Index l, double energy, const SvdOptions& opt, const char* method, Eigen::MatrixXd& E);
+// first, from which the caller makes U. The rank is r.S.size(). `lapack_from` as top_eigenpairs
+// (svd.h): the exact path passes the in-core exact SVD's, so the two solve alike.
+SvdResult spectrum_of(const Eigen::MatrixXd& G, Eigen::Index l, double energy, const SvdOptions& opt, const char* method, Eigen::MatrixXd& E,
+                      Eigen::Index lapack_from = k_lapack_eigen_from);
 
 }  // namespace btfc::fmf
