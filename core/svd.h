@@ -87,10 +87,10 @@ struct SvdResult {
 // double; l <= G.rows(). Shared by the exact SVD path and lpca's per-cluster PCA.
 // From `lapack_from` rows on it asks LAPACK's divide and conquer (dsyevd, where btfc links
 // OpenBLAS); below, Eigen's solver (unblocked Householder tridiagonalization and implicit QL:
-// minutes at 4096, and at 768 a third of a small BTF's encode where dsyevd takes a few
-// hundredths). The default keeps Eigen's solver, whose bits lpca's models and the randomized
-// paths' small Rayleigh-Ritz steps have always had; the exact SVD (in core and streamed) takes
-// LAPACK from k_exact_lapack_eigen_from on.
+// minutes at 4096, ~0.5 s at 768-1024 where dsyevd takes 0.1-0.2 s). The default keeps Eigen's
+// solver, whose bits lpca's models and the randomized paths' small Rayleigh-Ritz steps have
+// always had; the exact SVD (in core and streamed, and so lpyr's small levels) takes LAPACK from
+// k_exact_lapack_eigen_from on.
 constexpr Eigen::Index k_lapack_eigen_from = 1025;
 constexpr Eigen::Index k_exact_lapack_eigen_from = 128;
 void top_eigenpairs(const Eigen::MatrixXd& G, Eigen::Index l, Eigen::VectorXd& lambda, Eigen::MatrixXd& vecs,
