@@ -13,7 +13,8 @@
 //             e.g. lpyr; the encode may consume the input as `btfc compress` lets it (Context::
 //             consumable), unless --keep-input)
 //             [--load FILE [--rows 19683] [--texels N]]  (factorize a --dump file, or its first N
-//             texels, instead of synthesizing)
+//             texels, instead of synthesizing; with --codec: the whole file as the BTF the
+//             synth would have made, --width x --height texels)
 //             [--scheme krylov|power] [--svd-only]  (randomized scheme; skip the codec run)
 //             [--dump-only]  (with --dump or --dump-dfmf: stop after writing the files)
 //             [--dump-dfmf PREFIX]  (color=dfmf's three channel matrices, automatic offset, as
@@ -137,6 +138,55 @@ int main(int argc, char** argv) {
     std::printf("\n");
     std::fflush(stdout);
   };
+  // --codec: time another codec's encode of `btf` (the whole encode() call).
+  auto run_codec = [&](Btf& btf) {
+    const BtfDesc& d = btf.desc();
+    const double input_gb = double(d.num_values()) * 4 / 1e9;
+    auto spec = resolve_spec(codec_spec);
+    if (!spec.ok()) {
+      std::fprintf(stderr, "%s\n", spec.status().message().c_str());
+      return 1;
+    }
+    Context ctx;
+    if (!keep_input) ctx.consumable = &btf;  // as btfc compress: the input is not used again
+    const double t = now_s();
+    auto model = spec->first->encode(btf, spec->second, ctx);
+    if (!model.ok()) {
+      std::fprintf(stderr, "%s\n", model.status().message().c_str());
+      return 3;
+    }
+    const double enc = now_s() - t;
+    std::printf("codec      %s: encode %.2f s, payload %.1f MB (ratio %.0f : 1 vs float32), peak RSS %.2f GB (%.2f x input)\n",
+                model.value()->spec().c_str(), enc, double(model.value()->payload_bytes()) / 1e6,
+                double(d.num_values()) * 4 / double(model.value()->payload_bytes()), peak_rss_gb(), peak_rss_gb() / input_gb);
+    for (const auto& [k, v] : model.value()->stats().numbers) std::printf("  %s = %.6g\n", k.c_str(), v);
+    std::printf("  kernels ran on %s\n", ocl::device_summary().c_str());
+    return 0;
+  };
+  if (!load.empty() && !codec_spec.empty()) {
+    // --codec on a --dump file: a BTF of the synth's shape (--width x --height texels, UBO2003
+    // directions, RGB) whose values are read from FILE instead of synthesized (~2 s from the page
+    // cache where synthesis takes 8-49 s). The file must hold exactly that many values.
+    BtfDesc desc;
+    desc.width = width, desc.height = height, desc.channels = 3;
+    desc.lights = DirectionSet::ubo2003(), desc.views = DirectionSet::ubo2003();
+    auto btf = Btf::create(desc);
+    std::FILE* f = btf.ok() ? std::fopen(load.c_str(), "rb") : nullptr;
+    if (!f) {
+      std::fprintf(stderr, "%s: cannot open or no memory for %s\n", load.c_str(), desc.summary().c_str());
+      return 2;
+    }
+    std::fseek(f, 0, SEEK_END);
+    const size_t bytes = size_t(std::ftell(f));
+    std::fseek(f, 0, SEEK_SET);
+    if (bytes != btf->size() * 4 || std::fread(btf->data(), 4, btf->size(), f) != btf->size()) {
+      std::fprintf(stderr, "%s: %zu bytes, %s needs %zu\n", load.c_str(), bytes, desc.summary().c_str(), btf->size() * 4);
+      return 2;
+    }
+    std::fclose(f);
+    std::printf("input: %s (%s), %.2f GB float32\n", load.c_str(), desc.summary().c_str(), double(btf->size()) * 4 / 1e9);
+    return run_codec(btf.value());
+  }
   if (!load.empty()) {
     // A --dump file: m x n column-major float32, read into one buffer (the input of the peak RSS
     // ratio), of the kind a Btf holds (FloatBuffer: 2 MiB-aligned, huge pages requested), so the
@@ -203,22 +253,7 @@ int main(int argc, char** argv) {
     if (dump_only) return 0;
   }
 
-  if (!codec_spec.empty()) {
-    auto spec = resolve_spec(codec_spec);
-    if (!spec.ok()) return 1;
-    Context ctx;
-    if (!keep_input) ctx.consumable = &btf.value();  // as btfc compress: the input is not used again
-    t0 = now_s();
-    auto model = spec->first->encode(btf.value(), spec->second, ctx);
-    if (!model.ok()) return 3;
-    const double enc = now_s() - t0;
-    std::printf("codec      %s: encode %.2f s, payload %.1f MB (ratio %.0f : 1 vs float32), peak RSS %.2f GB (%.2f x input)\n",
-                model.value()->spec().c_str(), enc, double(model.value()->payload_bytes()) / 1e6,
-                double(d.num_values()) * 4 / double(model.value()->payload_bytes()), peak_rss_gb(), peak_rss_gb() / input_gb);
-    for (const auto& [k, v] : model.value()->stats().numbers) std::printf("  %s = %.6g\n", k.c_str(), v);
-    std::printf("  kernels ran on %s\n", ocl::device_summary().c_str());
-    return 0;
-  }
+  if (!codec_spec.empty()) return run_codec(btf.value());
   auto run = [&](int q, int p, const char* label) { return run_svd(btf->data(), d.abrdf_size(), d.num_texels(), input_gb, q, p, label); };
   const double err = run(power, over, "fmf");
   if (svd_only) return 0;

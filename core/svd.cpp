@@ -394,9 +394,11 @@ size_t column_sketch_sums_bytes(size_t m, size_t n, Index l) {
 MatrixXd gram_columns(const Eigen::Ref<const MatrixXf>& Wt, Index from) {
   // Blocks of rows of at most ~4 MB in double (4096 rows up to w = 128), in at most 16 groups on
   // the OpenMP threads (BLAS has one where the SVDs call this), each group summing its blocks in
-  // order, the groups summed in order after: the same bits at any thread count.
+  // order, the groups summed in order after: the same bits at any thread count. At least four
+  // blocks from 1024 rows: the streamed SVDs call this per chunk (~3400 texels at UBO2003 size),
+  // where one block left one core idle for a tenth of the last pass (docs/benchmarks.md).
   const Index n = Wt.rows(), w = Wt.cols(), add = w - from;
-  const Index rows_per = std::clamp<Index>((Index(1) << 19) / std::max<Index>(1, w), 256, 4096);
+  const Index rows_per = std::clamp<Index>(std::min<Index>((Index(1) << 19) / std::max<Index>(1, w), (n + 3) / 4), 256, 4096);
   const Index blocks_of_rows = (n + rows_per - 1) / rows_per, groups = std::min<Index>(blocks_of_rows, 16);
   std::vector<MatrixXd> parts(static_cast<size_t>(groups));
 #pragma omp parallel for schedule(static) if (groups > 1)

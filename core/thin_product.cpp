@@ -217,9 +217,10 @@ __attribute__((target("avx512f"))) void nn_tile_avx512(const float* B, size_t ld
     for (int t = 0; t < TK; ++t) _mm512_storeu_ps(Y + (c0 + c) * ldy + k + 16 * t, acc[t][c]);
 }
 
-// Rows [0, m / R * R) of Yp (m x lp column-major); Xr: n x lp row-major, lp a multiple of CC.
+// Rows [0, m / R * R) of Yp (m x lp column-major, leading dimension ldy); Xr: n x lp row-major, lp a
+// multiple of CC.
 template <int TK, int CC>
-void thin_nn(const float* B, size_t ldb, size_t m, size_t n, const float* Xr, size_t lp, float* Yp) {
+void thin_nn(const float* B, size_t ldb, size_t m, size_t n, const float* Xr, size_t lp, float* Yp, size_t ldy) {
   constexpr size_t R = 16 * TK;
   static_assert(k_nn_rows % R == 0, "a task holds whole row tiles");
   const size_t mfull = m / R * R;
@@ -231,7 +232,7 @@ void thin_nn(const float* B, size_t ldb, size_t m, size_t n, const float* Xr, si
       const size_t j1 = std::min(n, j0 + k_nn_texels);
       for (size_t k = k0; k < k1; k += R) {
         const bool prefetch = k + (k_nn_ahead + 1) * R <= m;
-        for (size_t c0 = 0; c0 < lp; c0 += CC) nn_tile_avx512<TK, CC>(B, ldb, Xr, lp, k, j0, j1, c0, Yp, m, j0 == 0, prefetch && c0 == 0);
+        for (size_t c0 = 0; c0 < lp; c0 += CC) nn_tile_avx512<TK, CC>(B, ldb, Xr, lp, k, j0, j1, c0, Yp, ldy, j0 == 0, prefetch && c0 == 0);
       }
     }
   }
@@ -288,7 +289,7 @@ namespace {
 #ifdef BTFC_THIN_AVX512
 constexpr Index k_tn_avx2_max = 96;  // widest l for the AVX2 kernel (4 groups of 24)
 
-// The staging copies of the last B^T Y, kept for the next (one buffer, process-wide, at most
+// The staging copy of the last B^T Y's Z, kept for the next (one buffer, process-wide, at most
 // 64 MiB): fresh pages cost 1-6 ms per MB on the VMs measured, and at the UBO2003 size faulting
 // the 16 MB of a product at l = 40 was a tenth of an in-core SVD's time (docs/benchmarks.md). A
 // call that finds the buffer in use (products on several threads) or too small allocates its
@@ -319,41 +320,12 @@ class Staging {
   static inline size_t s_count = 0;
 };
 
-// Z = B^T Y through tn_driver on Y's columns in `groups` (widths summing to at least l; the
-// padding zero), copied row-major into huge pages.
-void tn_padded(const std::vector<TnGroup>& groups, double (*squares)(const float*, size_t), const float* B, size_t ldb, size_t m,
-               size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy) {
-  const Index l = Y.cols();
-  size_t width = 0;
-  for (const TnGroup& g : groups) width += g.L;
-  Staging staging(m * width + n * width);
-  float* const yr = staging.data();
-  float* const zr = yr + m * width;
-  size_t y_at = 0, z_at = 0;
-  Index c0 = 0;
-  for (const TnGroup& g : groups) {
-    const Index L = Index(g.L), w = std::max<Index>(0, std::min(L, l - c0));
-    Eigen::Map<MatrixXfR> Yr(yr + y_at, Index(m), L);
-    Yr.leftCols(w) = Y.middleCols(c0, w);
-    Yr.rightCols(L - w).setZero();
-    y_at += m * g.L, c0 += L;
-  }
-  tn_driver(B, ldb, m, n, groups, yr, zr, energy, squares);
-  c0 = 0;
-  for (const TnGroup& g : groups) {
-    const Index L = Index(g.L), w = std::max<Index>(0, std::min(L, l - c0));
-    Eigen::Map<const MatrixXfR> Zr(zr + z_at, Index(n), L);
-    Z.middleCols(c0, w) = Zr.leftCols(w);
-    z_at += n * g.L, c0 += L;
-  }
-}
-
-// The AVX2 kernel where it applies (AVX2 + FMA, l <= k_tn_avx2_max); false otherwise. Up to 32
-// columns in one group; wider, groups of 24 (NV 3, TJ 4: the widest tile that keeps 4 texels)
-// and one of the remaining 8 or 16 (40 = 24 + 16: a fifth less work than two groups of 24).
-bool tn_avx2(const float* B, size_t ldb, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy) {
-  const Index l = Y.cols(), nv = (l + 7) / 8;
-  if (!cpu_has_avx2_fma() || l < 1 || l > k_tn_avx2_max || m < 1 || n < 1) return false;
+// The AVX2 kernel's groups where it applies (AVX2 + FMA, l <= k_tn_avx2_max); empty otherwise. Up
+// to 32 columns in one group; wider, groups of 24 (NV 3, TJ 4: the widest tile that keeps 4
+// texels) and one of the remaining 8 or 16 (40 = 24 + 16: a fifth less work than two groups of 24).
+std::vector<TnGroup> avx2_groups(Index l) {
+  const Index nv = (l + 7) / 8;
+  if (!cpu_has_avx2_fma() || l < 1 || l > k_tn_avx2_max) return {};
   const TnGroup k_groups[4] = {tn_group_avx2<1>(), tn_group_avx2<2>(), tn_group_avx2<3>(), tn_group_avx2<4>()};
   std::vector<TnGroup> groups;
   if (nv <= 4) groups.push_back(k_groups[nv - 1]);
@@ -361,33 +333,116 @@ bool tn_avx2(const float* B, size_t ldb, size_t m, size_t n, const ConstRefF& Y,
     groups.assign(size_t(nv / 3), k_groups[2]);
     if (nv % 3) groups.push_back(k_groups[nv % 3 - 1]);
   }
-  tn_padded(groups, block_squares, B, ldb, m, n, Y, Z, energy);
-  return true;
+  return groups;
+}
+
+std::vector<TnGroup> avx512_groups(Index l) {
+  const Index nv = (l + 15) / 16;
+  if (!cpu_has_avx512f() || nv < 1 || nv > 8) return {};
+  const TnGroup k_groups[8] = {tn_group_avx512<1>(), tn_group_avx512<2>(), tn_group_avx512<3>(), tn_group_avx512<4>(),
+                               tn_group_avx512<5>(), tn_group_avx512<6>(), tn_group_avx512<7>(), tn_group_avx512<8>()};
+  return {k_groups[nv - 1]};
 }
 #endif
 }  // namespace
 
-void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy,
+// Y for the kernels: one block of m x L row-major per group, side by side, zero-padded (tn_driver);
+// Y itself for the Eigen products (no groups).
+struct StagedY::Impl {
+  Index rows = 0, cols = 0;
+#ifdef BTFC_THIN_AVX512
+  std::vector<TnGroup> groups;
+  double (*squares)(const float*, size_t) = nullptr;
+  size_t width = 0;  // the groups' widths summed
+  std::unique_ptr<float, PageFree> yr;
+
+  void stage(const ConstRefF& Y, std::vector<TnGroup> gs, double (*sq)(const float*, size_t)) {
+    groups = std::move(gs), squares = sq, width = 0;
+    for (const TnGroup& g : groups) width += g.L;
+    yr.reset(static_cast<float*>(page_alloc(size_t(Y.rows()) * width * sizeof(float))));
+    size_t at = 0;
+    Index c0 = 0;
+    for (const TnGroup& g : groups) {
+      const Index L = Index(g.L), w = std::max<Index>(0, std::min(L, Y.cols() - c0));
+      Eigen::Map<MatrixXfR> Yr(yr.get() + at, Y.rows(), L);
+      Yr.leftCols(w) = Y.middleCols(c0, w);
+      Yr.rightCols(L - w).setZero();
+      at += size_t(Y.rows()) * g.L, c0 += L;
+    }
+  }
+#endif
+  Eigen::MatrixXf y;
+};
+
+StagedY::StagedY(const ConstRefF& Y) : m_impl(std::make_unique<Impl>()) {
+  Impl& s = *m_impl;
+  s.rows = Y.rows(), s.cols = Y.cols();
+#ifdef BTFC_THIN_AVX512
+  if (Y.rows() >= 1) {
+    std::vector<TnGroup> g = avx512_groups(Y.cols());
+    if (!g.empty()) {
+      s.stage(Y, std::move(g), squares_avx512);
+      return;
+    }
+    g = avx2_groups(Y.cols());
+    if (!g.empty()) {
+      s.stage(Y, std::move(g), block_squares);
+      return;
+    }
+  }
+#endif
+  s.y = Y;
+}
+StagedY::~StagedY() = default;
+StagedY::StagedY(StagedY&&) noexcept = default;
+StagedY& StagedY::operator=(StagedY&&) noexcept = default;
+Eigen::Index StagedY::rows() const { return m_impl->rows; }
+Eigen::Index StagedY::cols() const { return m_impl->cols; }
+
+void transposed_product(const float* B, size_t m, size_t n, const StagedY& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy,
                         size_t ldb) {
   if (ldb == 0) ldb = m;
+  const StagedY::Impl& s = Y.impl();
 #ifdef BTFC_THIN_AVX512
-  const Index nv = (Y.cols() + 15) / 16;
-  if (cpu_has_avx512f() && nv >= 1 && nv <= 8 && m >= 1 && n >= 1) {
-    const TnGroup k_groups[8] = {tn_group_avx512<1>(), tn_group_avx512<2>(), tn_group_avx512<3>(), tn_group_avx512<4>(),
-                                 tn_group_avx512<5>(), tn_group_avx512<6>(), tn_group_avx512<7>(), tn_group_avx512<8>()};
-    tn_padded({k_groups[nv - 1]}, squares_avx512, B, ldb, m, n, Y, Z, energy);
+  if (!s.groups.empty() && n >= 1) {
+    // Z through the groups' row-major blocks of n x L, copied out into Z's columns.
+    Staging staging(n * s.width);
+    float* const zr = staging.data();
+    tn_driver(B, ldb, m, n, s.groups, s.yr.get(), zr, energy, s.squares);
+    size_t z_at = 0;
+    Index c0 = 0;
+    for (const TnGroup& g : s.groups) {
+      const Index L = Index(g.L), w = std::max<Index>(0, std::min(L, s.cols - c0));
+      Eigen::Map<const MatrixXfR> Zr(zr + z_at, Index(n), L);
+      Z.middleCols(c0, w) = Zr.leftCols(w);
+      z_at += n * g.L, c0 += L;
+    }
     return;
   }
-  if (tn_avx2(B, ldb, m, n, Y, Z, energy)) return;
+  if (!s.groups.empty()) {  // no texels
+    if (energy) *energy = 0;
+    return;
+  }
 #endif
-  eigen_tn(B, ldb, m, n, Y, Z);
+  eigen_tn(B, ldb, m, n, s.y, Z);
   if (energy) *energy = squared_norm(B, m, n, ldb);
 }
 
+void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy,
+                        size_t ldb) {
+  transposed_product(B, m, n, StagedY(Y), Z, energy, ldb);
+}
+
 bool transposed_product_avx2(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::MatrixXf& Z, double* energy, size_t ldb) {
-#ifdef BTFC_THIN_AVX512
   Z.resize(Index(n), Y.cols());
-  return tn_avx2(B, ldb ? ldb : m, m, n, Y, Z, energy);
+#ifdef BTFC_THIN_AVX512
+  std::vector<TnGroup> groups = avx2_groups(Y.cols());
+  if (groups.empty() || m < 1 || n < 1) return false;
+  StagedY staged(Y.topRows(0));  // no rows: nothing staged, then the AVX2 groups (not AVX-512's)
+  staged.impl().rows = Y.rows();
+  staged.impl().stage(Y, std::move(groups), block_squares);
+  transposed_product(B, m, n, staged, Z, energy, ldb);
+  return true;
 #else
   (void)B, (void)m, (void)n, (void)Y, (void)Z, (void)energy, (void)ldb;
   return false;
@@ -404,15 +459,20 @@ bool nn_tiles(const float* B, size_t ldb, size_t m, size_t n, const ConstRefF& X
   if (!cpu_has_avx512f() || l < 1 || l > 128 || m < R || n < 1) return false;
   // 12 or 8 columns per tile, whichever pads l less (12: fewer re-reads of B's tile).
   const Index cc = (l + 11) / 12 * 12 <= (l + 7) / 8 * 8 ? 12 : 8, lp = (l + cc - 1) / cc * cc;
-  PageBuffer<float> xr_buf(n * size_t(lp)), yp_buf(m * size_t(lp));
-  Eigen::Map<MatrixXfR> Xr(xr_buf.data(), Index(n), lp);
-  Eigen::Map<Eigen::MatrixXf> Yp(yp_buf.data(), Index(m), lp);
+  // X row-major and padded in the staging buffer; Y written in place where l needs no padding,
+  // else through an m x lp block there. Fresh pages for that block on every call (a pass's
+  // parts) faulted for 5 % of a color=dfmf encode's power pass (docs/benchmarks.md).
+  const bool direct = lp == l;
+  Staging staging(n * size_t(lp) + (direct ? 0 : m * size_t(lp)));
+  Eigen::Map<MatrixXfR> Xr(staging.data(), Index(n), lp);
   Xr.leftCols(l) = X;
   Xr.rightCols(lp - l).setZero();
-  if (cc == 12) thin_nn<2, 12>(B, ldb, m, n, Xr.data(), size_t(lp), Yp.data());
-  else thin_nn<2, 8>(B, ldb, m, n, Xr.data(), size_t(lp), Yp.data());
+  float* const yp = direct ? Y.data() : staging.data() + n * size_t(lp);
+  const size_t ldy = direct ? size_t(Y.outerStride()) : m;
+  if (cc == 12) thin_nn<2, 12>(B, ldb, m, n, Xr.data(), size_t(lp), yp, ldy);
+  else thin_nn<2, 8>(B, ldb, m, n, Xr.data(), size_t(lp), yp, ldy);
   const Index mfull = Index(m / R * R), tail = Index(m) - mfull;
-  Y = Yp.leftCols(l);
+  if (!direct) Y.topRows(mfull) = Eigen::Map<const Eigen::MatrixXf>(yp, Index(m), lp).topLeftCorner(mfull, l);
   ConstStridedF map(B, Index(m), Index(n), Eigen::OuterStride<>(Index(ldb)));
   if (tail > 0) Y.bottomRows(tail).noalias() = map.bottomRows(tail) * X;
   return true;

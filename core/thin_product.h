@@ -15,6 +15,7 @@
 #pragma once
 #include <Eigen/Core>
 #include <cstddef>
+#include <memory>
 
 namespace btfc {
 
@@ -26,6 +27,29 @@ using ConstRefF = Eigen::Ref<const Eigen::MatrixXf>;
 void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy = nullptr,
                         size_t ldb = 0);
 void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, Eigen::MatrixXf& Z, double* energy = nullptr,
+                        size_t ldb = 0);
+
+// Y of B^T Y made ready once for several products with the same Y (the parts and chunks of a
+// pass): the kernels read Y row-major and zero-padded, a copy (1.3 MB at m = 6561, l = 48) that,
+// made by every call, ran on one thread while the other waited, 8 % of a color=dfmf encode's
+// B^T Q passes (docs/benchmarks.md). Holds its own copy: Y may change or go afterwards.
+class StagedY {
+ public:
+  explicit StagedY(const ConstRefF& Y);
+  ~StagedY();
+  StagedY(StagedY&&) noexcept;
+  StagedY& operator=(StagedY&&) noexcept;
+  Eigen::Index rows() const;
+  Eigen::Index cols() const;
+  struct Impl;
+  const Impl& impl() const { return *m_impl; }
+  Impl& impl() { return *m_impl; }
+
+ private:
+  std::unique_ptr<Impl> m_impl;
+};
+// The same product and bits as the call with Y itself; Y.rows() must be m.
+void transposed_product(const float* B, size_t m, size_t n, const StagedY& Y, Eigen::Ref<Eigen::MatrixXf> Z, double* energy = nullptr,
                         size_t ldb = 0);
 
 // For tests: transposed_product through its AVX2 kernel (the one CPUs without AVX-512 run for

@@ -8,7 +8,9 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <memory>
 #include <random>
+#include <tuple>
 #include <string>
 
 #include "core/cpu_dispatch.h"
@@ -417,6 +419,50 @@ TEST(Svd, ThinProductKernelEqualsTheReference) {
   double ref = 0;
   for (float& x : v) x = u(rng), ref += double(x) * double(x);
   EXPECT_NEAR(squared_norm(v.data(), v.size()), ref, 1e-12 * ref);
+}
+
+// One staged Y (StagedY) serves several products, as a pass's parts share Q: each gives the bits
+// of the call with Y itself, whatever B's width, leading dimension or place, and the staged copy
+// outlives Y. B X written into a block of a larger matrix (its leading dimension) gives the bits
+// of a plain result, with and without the tiles' padded columns.
+TEST(Svd, StagedOperandAndStridedResultGiveTheBitsOfThePlainProducts) {
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<float> u(-1.f, 1.f);
+  const size_t m = 2100, ld = 3 * m + 5;
+  std::vector<float> tall(ld * 300);
+  for (float& x : tall) x = u(rng);
+  for (int l : {5, 17, 40, 48, 100, 130}) {
+    auto Y = std::make_unique<Eigen::MatrixXf>(Eigen::Index(m), l);
+    for (Eigen::Index i = 0; i < Y->size(); ++i) Y->data()[i] = u(rng);
+    const Eigen::MatrixXf Ycopy = *Y;
+    const StagedY staged(*Y);
+    EXPECT_EQ(staged.rows(), Eigen::Index(m));
+    EXPECT_EQ(staged.cols(), l);
+    Y.reset();  // the staged copy is its own
+    for (auto [off, n, ldb] : {std::tuple<size_t, size_t, size_t>{0, 300, ld}, {7, 123, ld}, {m, 9, ld}, {0, 1, m}}) {
+      const float* B = tall.data() + off;
+      Eigen::MatrixXf Z1, Z2(Eigen::Index(n), l);
+      double e1 = -1, e2 = -1;
+      transposed_product(B, m, n, Ycopy, Z1, &e1, ldb);
+      transposed_product(B, m, n, staged, Z2, &e2, ldb);
+      EXPECT_TRUE(Z1 == Z2) << "l " << l << " n " << n;
+      EXPECT_EQ(e1, e2) << "l " << l << " n " << n;
+      const Eigen::MatrixXd ref = Eigen::Map<const Eigen::MatrixXf, 0, Eigen::OuterStride<>>(B, Eigen::Index(m), Eigen::Index(n),
+                                                                                           Eigen::OuterStride<>(Eigen::Index(ldb)))
+                                      .cast<double>()
+                                      .transpose() *
+                                  Ycopy.cast<double>();
+      EXPECT_LT((Z2.cast<double>() - ref).cwiseAbs().maxCoeff(), 4e-7 * double(m)) << "l " << l << " n " << n;
+    }
+    // B X into columns [3, 3 + l) of a wider matrix with more rows (outer stride m + 11).
+    Eigen::MatrixXf X(Eigen::Index(250), l), P1, big = Eigen::MatrixXf::Constant(Eigen::Index(m + 11), l + 6, 9.f);
+    for (Eigen::Index i = 0; i < X.size(); ++i) X.data()[i] = u(rng);
+    thin_product(tall.data() + 3, m, 250, X, P1, ld);
+    thin_product(tall.data() + 3, m, 250, X, Eigen::Ref<Eigen::MatrixXf>(big.block(2, 3, Eigen::Index(m), l)), ld);
+    EXPECT_TRUE(big.block(2, 3, Eigen::Index(m), l) == P1) << "B X into a block, l " << l;
+    big.block(2, 3, Eigen::Index(m), l).setConstant(9.f);
+    EXPECT_EQ((big.array() != 9.f).count(), 0) << "nothing written outside the block, l " << l;
+  }
 }
 
 // B as rows [7, 7 + m) of a taller matrix (leading dimension 3 m + 5, as color=dfmf's channels

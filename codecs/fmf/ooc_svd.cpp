@@ -4,6 +4,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <vector>
 
 #include "codecs/fmf/ooc_pass.h"
@@ -40,10 +41,10 @@ class Krylov {
   }
 
   void begin() {
-    if (m_phase == Phase::power) m_q = m_P.middleCols(Index(m_in_p - 1) * m_l, m_l).cast<float>();
+    if (m_phase == Phase::power) m_q.emplace(m_P.middleCols(Index(m_in_p - 1) * m_l, m_l).cast<float>());
     if (m_phase == Phase::project) {
       m_w = Index(m_in_p) * m_l;
-      m_q = m_P.middleCols(m_w - m_l, m_l).cast<float>();
+      m_q.emplace(m_P.middleCols(m_w - m_l, m_l).cast<float>());
       m_G = MatrixXd::Zero(m_w, m_w);
     }
   }
@@ -69,14 +70,14 @@ class Krylov {
       }
       case Phase::power: {  // Y = B B^T Q_b; Z = B^T Q_b is block b of W^T, kept
         auto Z = wt_block(c, count, Index(m_in_p - 1) * m_l).middleRows(Index(o), Index(k));
-        transposed_product(B, m_m, k, m_q, Z, nullptr, ldb);
+        transposed_product(B, m_m, k, *m_q, Z, nullptr, ldb);
         thin_product(B, m_m, k, Z, m_y, ldb);
         add_into(acc, m_y);
         break;
       }
       case Phase::project: {  // the newest block's B^T Q completes W^T
         auto Z = wt_block(c, count, m_w - m_l).middleRows(Index(o), Index(k));
-        transposed_product(B, m_m, k, m_q, Z, nullptr, ldb);
+        transposed_product(B, m_m, k, *m_q, Z, nullptr, ldb);
         break;
       }
       case Phase::done:
@@ -197,7 +198,8 @@ class Krylov {
   std::vector<float> m_w_sums;   // sparse sketch: B S summed over the owned chunks (m x s)
   double m_energy = 0, m_last_err = -1;
   MatrixXd m_P, m_K, m_G;  // the basis (m x kept l), its Gram matrix P^T B B^T P, W W^T
-  MatrixXf m_q, m_y;
+  std::optional<StagedY> m_q;  // this pass's Q, staged once for every part's B^T Q
+  MatrixXf m_y;
   std::vector<MatrixXf> m_wt;
 };
 
