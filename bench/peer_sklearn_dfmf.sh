@@ -7,7 +7,7 @@
 # seed 1). `bench_fmf --dump-dfmf` writes its three dfmf channel matrices (Y' = log luminance, U',
 # V'; 6561 rows x 65536 texels, float32, 1.72 GB each) exactly as the encode forms them
 # (automatic offset, dfmf_channel). For each repetition and each rank R (chroma rank R too):
-#   btfc     bench_fmf --codec fmf:rank=R:color=dfmf:power_iters=Q, Q = 4 (default) and 1: the
+#   btfc     bench_fmf --load RGB --codec fmf:rank=R:color=dfmf:power_iters=Q, Q = 4 (default) and 1: the
 #            whole encode() call (offset, conversion, the three SVDs in one stream, quantisation,
 #            the model), timed around the call in the process; per-channel errors from the
 #            model's rel_error stats
@@ -22,20 +22,33 @@
 # fastest such scikit-learn run (goal <= 0.5) and each one's peak RSS over the input's size
 # (btfc: the RGB BTF, 5.16 GB; scikit-learn: one channel matrix, the one it holds).
 #
-# Usage: bench/peer_sklearn_dfmf.sh [--build DIR] [--workdir DIR] [--ranks "16 32 64"] [--repeat 2] [--keep]
+# Usage: bench/peer_sklearn_dfmf.sh [--build DIR] [--workdir DIR] [--matrix FILE] [--ranks "16 32 64"] [--repeat 2] [--keep]
 #   The channel files go to WORKDIR (default BUILD/peer-sklearn; 5.2 GB) and are removed at the
-#   end unless --keep (an existing set is reused). Needs python3-sklearn (scripts/setup.sh).
+#   end unless --keep (an existing set is reused), and so does the RGB matrix btfc reads (5.2 GB,
+#   WORKDIR/ubo2003.f32), unless --matrix names an existing `bench_fmf --dump` of the same BTF
+#   (as bench/peer_sklearn.sh takes; not removed). Needs python3-sklearn (scripts/setup.sh).
 set -euo pipefail
 . "$(dirname "$0")/peer_common.sh"
-[ -z "$MATRIX" ] || { echo "--matrix: this script dumps its own channel matrices (see --workdir, --keep)" >&2; exit 1; }
 mkdir -p "$WORKDIR"
 PREFIX="$WORKDIR/dfmf"
 DUMPED=0
-if [ ! -f "$PREFIX.v.f32" ]; then
-  "$BENCH" --dump-dfmf "$PREFIX" --dump-only >&2
+RGB_DUMPED=0
+if [ -z "$MATRIX" ]; then MATRIX="$WORKDIR/ubo2003.f32"; fi
+if [ ! -f "$PREFIX.v.f32" ] || [ ! -f "$MATRIX" ]; then
+  # One synthesis for both: the RGB matrix (btfc's input, read back by every btfc run instead of
+  # synthesizing it again: 8-49 s a run) and the channel matrices.
+  if [ -f "$MATRIX" ]; then
+    "$BENCH" --dump-dfmf "$PREFIX" --dump-only >&2
+  else
+    "$BENCH" --dump "$MATRIX" --dump-dfmf "$PREFIX" --dump-only >&2
+    RGB_DUMPED=1
+  fi
   DUMPED=1
 fi
-cleanup() { if [ "$DUMPED" = 1 ] && [ "$KEEP" = 0 ]; then rm -f "$PREFIX".[yuv].f32; fi; }
+cleanup() {
+  if [ "$DUMPED" = 1 ] && [ "$KEEP" = 0 ]; then rm -f "$PREFIX".[yuv].f32; fi
+  if [ "$RGB_DUMPED" = 1 ] && [ "$KEEP" = 0 ]; then rm -f "$MATRIX"; fi
+}
 trap cleanup EXIT
 
 # "sklearn rank R q Q NORM: T s, errors Ey Eu Ev, peak RSS X x input"
@@ -66,7 +79,7 @@ EOF
 bt() {
   local out
   local p=${3:-16}
-  out=$("$BENCH" --codec "fmf:rank=$1:color=dfmf:power_iters=$2:oversample=$p")
+  out=$("$BENCH" --load "$MATRIX" --codec "fmf:rank=$1:color=dfmf:power_iters=$2:oversample=$p")
   "$PY" - "$1" "$2" <<EOF
 import re
 out = """$out"""
