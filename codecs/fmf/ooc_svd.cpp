@@ -286,17 +286,23 @@ Result<std::vector<SvdResult>> streaming_svds(const ChunkSource& src, const std:
       for (size_t a = 0; a < active.size(); ++a) ks[active[a]].pack(d + off[a]);
     };
     BTFC_RETURN_IF_ERROR(run.pass(payload, fn, pack));
-    for (size_t a = 0; a < active.size(); ++a) ks[active[a]].end(run.sums().data() + off[a]);
+    // The steps between passes (orthonormalisation, the stopping test) are each factorization's
+    // own: color=dfmf's three on both threads (on one, they left the other idle for 3 % of an
+    // encode at UBO2003 size; docs/benchmarks.md). The same bits in any order.
+#pragma omp parallel for schedule(dynamic, 1) if (active.size() > 1)
+    for (long long a = 0; a < (long long)active.size(); ++a) ks[active[size_t(a)]].end(run.sums().data() + off[size_t(a)]);
     if (first) BTFC_RETURN_IF_ERROR(src.finish_first_pass(coll));
   }
   run.release();
   std::vector<float>().swap(parts);
-  std::vector<SvdResult> rs;
-  for (Krylov& k : ks) {
-    MatrixXfR sxv;
-    SvdResult r = k.result(src, chunks, sxv);
-    BTFC_RETURN_IF_ERROR(run.gather(r, sxv));
-    rs.push_back(std::move(r));
+  // The results too (the Ritz step, SxV), then the gathers in order (collectives).
+  std::vector<SvdResult> rs(ks.size());
+  std::vector<MatrixXfR> sxvs(ks.size());
+#pragma omp parallel for schedule(dynamic, 1) if (ks.size() > 1)
+  for (long long i = 0; i < (long long)ks.size(); ++i) rs[size_t(i)] = ks[size_t(i)].result(src, chunks, sxvs[size_t(i)]);
+  for (size_t i = 0; i < ks.size(); ++i) {
+    BTFC_RETURN_IF_ERROR(run.gather(rs[i], sxvs[i]));
+    MatrixXfR().swap(sxvs[i]);
   }
   run.done(stats_out);
   return rs;
