@@ -273,7 +273,27 @@ BTFC_CPU_CLONES void add_piece(float* acc, const float* v, size_t count, bool ne
 }  // namespace
 
 void sparse_sign_columns(const float* B, size_t ldb, size_t m, size_t n, const SparseSign& S, float* W, double* energy, size_t first,
-                         bool accumulate) {
+                         bool accumulate, size_t segment) {
+  // The energy by segments of rows: a piece that crosses a segment's end is added in two calls
+  // (the same sums), its squares going to each segment's own total. One segment: as one call.
+  const size_t seg = segment ? segment : std::max<size_t>(1, m), nseg = (m + seg - 1) / seg;
+  auto add = [&](float* acc, const float* piece, size_t i0, size_t rows, bool negative, bool en, double* e) {
+    if (!en || nseg == 1) {
+      add_piece(acc, piece, rows, negative, en, e[0]);
+      return;
+    }
+    for (size_t a = 0; a < rows;) {
+      const size_t k = (i0 + a) / seg, b = std::min(rows, (k + 1) * seg - i0);
+      add_piece(acc + a, piece + a, b - a, negative, true, e[k]);
+      a = b;
+    }
+  };
+  auto total = [&](const std::vector<double>& part) {  // per segment, the parts in order: independent of the thread count
+    for (size_t k = 0; k < nseg; ++k) {
+      energy[k] = 0;
+      for (size_t p = k; p < part.size(); p += nseg) energy[k] += part[p];
+    }
+  };
   // Each texel's bucket per layer, from the row groups' picks (only the blocks of row groups
   // that hold texels [first, first + n)). An entry: the bucket (texel order) or the texel from
   // first (bucket order), bit 30 set in its first layer, bit 31 when it enters negated.
@@ -302,13 +322,13 @@ void sparse_sign_columns(const float* B, size_t ldb, size_t m, size_t n, const S
     const size_t quads = (m + 4 * k_texel_chunk_max - 1) / (4 * k_texel_chunk_max);
     const size_t per = ((m + 4 * quads - 1) / (4 * quads) + 15) / 16 * 16;  // rows per chunk
     const int64_t chunks = int64_t((m + per - 1) / per);
-    std::vector<double> part(size_t(chunks), 0.0);
+    std::vector<double> part(size_t(chunks) * nseg, 0.0);
 #pragma omp parallel for schedule(static, 1)
     for (int64_t chunk = 0; chunk < chunks; ++chunk) {
       const size_t i0 = size_t(chunk) * per, rows = std::min(per, m - i0);
       if (!accumulate)
         for (size_t b = 0; b < S.s; ++b) std::fill_n(W + b * m + i0, rows, 0.0f);
-      double e = 0;
+      std::vector<double> e(nseg, 0.0);
       for (size_t j = 0; j < n; ++j) {
         const float* piece = B + j * ldb + i0;
         if (j + 4 < n) {  // the start of the piece four texels ahead (kept with the fused loop, not timed alone)
@@ -317,15 +337,12 @@ void sparse_sign_columns(const float* B, size_t ldb, size_t m, size_t n, const S
         }
         for (size_t t = 0; t < S.layers; ++t) {
           const uint32_t c = entry[j * S.layers + t];
-          add_piece(W + size_t(c & k_index) * m + i0, piece, rows, (c >> 31) != 0, energy && (c & k_first), e);
+          add(W + size_t(c & k_index) * m + i0, piece, i0, rows, (c >> 31) != 0, energy && (c & k_first), e.data());
         }
       }
-      part[size_t(chunk)] = e;
+      std::copy(e.begin(), e.end(), part.begin() + chunk * int64_t(nseg));
     }
-    if (energy) {
-      *energy = 0;
-      for (double v : part) *energy += v;  // fixed order: independent of the thread count
-    }
+    if (energy) total(part);
     return;
   }
   // Bucket order: each bucket's texels, in texel order and layer by layer; a task sums one
@@ -341,12 +358,12 @@ void sparse_sign_columns(const float* B, size_t ldb, size_t m, size_t n, const S
   // Tasks: a block of rows and a range of buckets (the buckets read disjoint texels).
   const size_t row_blocks = (m + k_column_rows - 1) / k_column_rows, ranges = S.s / k_column_buckets;
   const int64_t tasks = int64_t(row_blocks * ranges);
-  std::vector<double> part(size_t(tasks), 0.0);
+  std::vector<double> part(size_t(tasks) * nseg, 0.0);
 #pragma omp parallel for schedule(dynamic, 1)
   for (int64_t task = 0; task < tasks; ++task) {
     const size_t i0 = size_t(task) / ranges * k_column_rows, rows = std::min(k_column_rows, m - i0);
     const size_t b0 = size_t(task) % ranges * k_column_buckets;
-    double e = 0;
+    std::vector<double> e(nseg, 0.0);
     for (size_t b = b0; b < b0 + k_column_buckets; ++b) {
       float* acc = W + b * m + i0;
       if (!accumulate) std::fill_n(acc, rows, 0.0f);
@@ -357,15 +374,12 @@ void sparse_sign_columns(const float* B, size_t ldb, size_t m, size_t n, const S
           const float* next = B + size_t(list[at + 1] & k_index) * ldb + i0;
           for (size_t i = 0; i < rows; i += 16) __builtin_prefetch(next + i);
         }
-        add_piece(acc, piece, rows, (c >> 31) != 0, energy && (c & k_first), e);  // squares once: in the first layer
+        add(acc, piece, i0, rows, (c >> 31) != 0, energy && (c & k_first), e.data());  // squares once: in the first layer
       }
     }
-    part[size_t(task)] = e;
+    std::copy(e.begin(), e.end(), part.begin() + task * int64_t(nseg));
   }
-  if (energy) {
-    *energy = 0;
-    for (double v : part) *energy += v;  // fixed order: independent of the thread count
-  }
+  if (energy) total(part);
 }
 
 }  // namespace btfc

@@ -68,7 +68,10 @@ bool sparse_sign_product_avx2(const float* B, size_t n, const SparseSign& S, flo
 // of the in-core block Krylov SVD (core/svd.cpp). With `accumulate`, W += B S (W not zeroed
 // first): calls on consecutive chunks of texels, in order, leave W with the bits of one call on
 // them all (each bucket's running sum goes on in texel order); the streamed SVD's first pass.
+// With `segment` > 0, B's rows are matrices of `segment` rows stacked (color=dfmf's channels in a
+// texel's column) and `energy` gets ceil(m / segment) values, each matrix's ||.||_F^2; W's bits
+// do not depend on it.
 void sparse_sign_columns(const float* B, size_t ldb, size_t m, size_t n, const SparseSign& S, float* W, double* energy = nullptr,
-                         size_t first = 0, bool accumulate = false);
+                         size_t first = 0, bool accumulate = false, size_t segment = 0);
 
 }  // namespace btfc

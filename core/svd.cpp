@@ -378,10 +378,11 @@ void column_sketch_product(const float* B, size_t m, size_t n, const Sketch& ske
 }
 
 void column_sketch_sums(const float* B, size_t m, size_t n, const Sketch& sketch, float* W, double* energy, size_t first,
-                        size_t ldb) {
-  double e = 0;
-  sparse_sign_columns(B, ldb ? ldb : m, m, n, sketch.S, W, energy ? &e : nullptr, first, true);
-  if (energy) *energy += e;
+                        size_t ldb, size_t segment) {
+  std::vector<double> e(segment ? (m + segment - 1) / segment : 1, 0.0);
+  sparse_sign_columns(B, ldb ? ldb : m, m, n, sketch.S, W, energy ? e.data() : nullptr, first, true, segment);
+  if (energy)
+    for (size_t k = 0; k < e.size(); ++k) energy[k] += e[k];
 }
 
 void column_sketch_finish(const float* W, size_t m, const Sketch& sketch, Eigen::Ref<MatrixXf> Y) { sketch_times_gaussian(W, m, sketch, Y); }

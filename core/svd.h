@@ -143,9 +143,10 @@ size_t column_sketch_bytes(size_t m, size_t n, Eigen::Index l);
 // sketch's), *energy += its ||B||_F^2; then once Y = W G. One W G for the whole stream instead of
 // one per chunk (2 m s l flops each: a fifth of the streamed pass at UBO2003 size), for
 // column_sketch_sums_bytes(m, n, l) bytes of W (0: the sketch is dense, use
-// column_sketch_product).
+// column_sketch_product). With `segment` > 0: B's rows are matrices of `segment` rows stacked,
+// energy[k] += matrix k's ||.||_F^2 (sparse_sign_columns).
 void column_sketch_sums(const float* B, size_t m, size_t n, const Sketch& sketch, float* W, double* energy, size_t first,
-                        size_t ldb = 0);
+                        size_t ldb = 0, size_t segment = 0);
 void column_sketch_finish(const float* W, size_t m, const Sketch& sketch, Eigen::Ref<Eigen::MatrixXf> Y);
 size_t column_sketch_sums_bytes(size_t m, size_t n, Eigen::Index l);
 

@@ -361,6 +361,64 @@ TEST(StreamingDfmf, InPlaceSplitKeepsEachPartWhereItWas) {
   EXPECT_FALSE(fmf::streaming_svds(dst, owned_chunks(dst, 0, 1), &bad, opts, one).ok());
 }
 
+// From 1024 texels the first pass's sketch is sparse, and a split in place whose factorizations
+// share it sums one sketch of each texel's stacked channels (streaming_svds) instead of one per
+// channel: the models are those of three sketches of split parts, bit for bit, and each channel
+// keeps its own energy (its error estimate), in the bucket order (150 rows) and the texel order
+// (4200 rows) of the sketch.
+TEST(StreamingDfmf, StackedSketchGivesEachChannelItsOwnSumsAndEnergy) {
+  std::mt19937_64 rng(11);
+  std::normal_distribution<float> g(0.f, 1.f);
+  for (size_t m : {size_t(50), size_t(1400)}) {
+    const size_t in_rows = 3 * m, n = 1100;
+    // Rank 6 plus noise, each row's three values (the "channels") on their own scale.
+    Eigen::MatrixXf L(Eigen::Index(in_rows), 6), R(6, Eigen::Index(n));
+    for (Eigen::Index i = 0; i < L.size(); ++i) L.data()[i] = g(rng) * float(1 + i % 3);
+    for (Eigen::Index i = 0; i < R.size(); ++i) R.data()[i] = g(rng) / float(1 + i % 6);
+    Eigen::MatrixXf B = L * R;
+    for (Eigen::Index i = 0; i < B.size(); ++i) B.data()[i] += 0.01f * g(rng);
+    std::vector<float> kept(B.data(), B.data() + B.size());
+    SvdOptions o;
+    o.max_rank = 4, o.oversample = 4, o.power_iters = 1, o.method = SvdMethod::randomized;
+    ASSERT_TRUE(make_column_sketch(n, 8, o).sparse());
+    const std::vector<SvdOptions> opts{o, o, o};
+    auto value = [&](const float* col, size_t i, size_t r) { return col[3 * r + i]; };
+    fmf::ChunkSplit plain, in_place;
+    plain.channels = in_place.channels = 3, plain.rows = in_place.rows = m;
+    plain.part_values = in_place.part_values = 200 * m;  // parts of 200 texels in chunks of 300
+    plain.split = [&](size_t, size_t, const float* b, size_t count, float* const* out) {
+      for (size_t t = 0; t < count; ++t)
+        for (size_t r = 0; r < m; ++r)
+          for (size_t i = 0; i < 3; ++i) out[i][t * m + r] = value(b + t * in_rows, i, r);
+    };
+    const MatrixChunks src(B.data(), in_rows, n, 300), dst(kept.data(), in_rows, n, 300);
+    in_place.in_place = [&](size_t c, size_t off) { return kept.data() + (dst.chunk_first(c) + off) * in_rows; };
+    in_place.split_in_place = [&](size_t, size_t, float* b, size_t count) {
+      std::vector<float> col(in_rows);
+      for (size_t t = 0; t < count; ++t) {
+        for (size_t i = 0; i < 3; ++i)
+          for (size_t r = 0; r < m; ++r) col[i * m + r] = value(b + t * in_rows, i, r);
+        std::copy(col.begin(), col.end(), b + t * in_rows);
+      }
+    };
+    Collective one;
+    auto want = fmf::streaming_svds(src, owned_chunks(src, 0, 1), &plain, opts, one);
+    auto got = fmf::streaming_svds(dst, owned_chunks(dst, 0, 1), &in_place, opts, one);
+    ASSERT_TRUE(want.ok() && got.ok());
+    for (size_t i = 0; i < 3; ++i) {
+      const SvdResult &w = want.value()[i], &r = got.value()[i];
+      EXPECT_TRUE(w.U == r.U && w.SxV == r.SxV && w.S == r.S) << "m " << m << ", matrix " << i;
+      double e = 0;
+      for (size_t t = 0; t < n; ++t)
+        for (size_t k = 0; k < m; ++k) e += double(B(Eigen::Index(3 * k + i), Eigen::Index(t))) * B(Eigen::Index(3 * k + i), Eigen::Index(t));
+      EXPECT_NEAR(r.total_energy, e, 1e-10 * e) << "m " << m << ", matrix " << i;
+      EXPECT_NEAR(r.total_energy, w.total_energy, 1e-12 * e) << "m " << m << ", matrix " << i;
+      EXPECT_GT(r.rel_error_estimate(), 0.0);
+    }
+    EXPECT_GT(got.value()[2].total_energy, 2 * got.value()[0].total_energy) << "the channels' energies differ: each is its own";
+  }
+}
+
 TEST(StreamingDfmf, ChannelChunksAreTheInCoreTransform) {
   const Btf b = noisy(6, 5);
   const size_t rows = b.desc().num_images();

@@ -421,6 +421,41 @@ TEST(Svd, ThinProductKernelEqualsTheReference) {
   EXPECT_NEAR(squared_norm(v.data(), v.size()), ref, 1e-12 * ref);
 }
 
+// Matrices stacked in B's rows (color=dfmf's channels in a texel's column), sketched in one call
+// with `segment`: W is each matrix's own sums stacked, bit for bit, and energy[k] matrix k's
+// ||.||_F^2, with segments ending within the texel order's row chunks (3 x 1500 rows) and in the
+// bucket order (3 x 41).
+TEST(Svd, StackedColumnSketchSumsEachMatrixApart) {
+  std::mt19937_64 rng(8);
+  std::uniform_real_distribution<float> u(-1.f, 1.f);
+  const size_t n = 1300;
+  SvdOptions opt;
+  const Sketch sketch = make_column_sketch(n, 12, opt);
+  ASSERT_TRUE(sketch.sparse());
+  const size_t s = sketch.S.s;
+  for (size_t m : {size_t(41), size_t(1500)}) {
+    std::vector<float> b(3 * m * n);
+    for (float& x : b) x = u(rng) * 3.f;
+    std::vector<float> w(3 * m * s, 0.0f), wi(m * s);
+    double e[3] = {0, 0, 0};
+    column_sketch_sums(b.data(), 3 * m, n, sketch, w.data(), e, 0, 0, m);
+    for (size_t k = 0; k < 3; ++k) {
+      std::fill(wi.begin(), wi.end(), 0.0f);
+      double ek = 0;
+      column_sketch_sums(b.data() + k * m, m, n, sketch, wi.data(), &ek, 0, 3 * m);
+      size_t differ = 0;
+      for (size_t c = 0; c < s; ++c)
+        for (size_t r = 0; r < m; ++r) differ += w[c * 3 * m + k * m + r] != wi[c * m + r];
+      EXPECT_EQ(differ, 0u) << "m " << m << ", matrix " << k;
+      double ref = 0;
+      for (size_t t = 0; t < n; ++t)
+        for (size_t r = 0; r < m; ++r) ref += double(b[t * 3 * m + k * m + r]) * b[t * 3 * m + k * m + r];
+      EXPECT_NEAR(e[k], ref, 1e-12 * ref) << "m " << m << ", matrix " << k;
+      EXPECT_NEAR(ek, ref, 1e-12 * ref);
+    }
+  }
+}
+
 // One staged Y (StagedY) serves several products, as a pass's parts share Q: each gives the bits
 // of the call with Y itself, whatever B's width, leading dimension or place, and the staged copy
 // outlives Y. B X written into a block of a larger matrix (its leading dimension) gives the bits
