@@ -83,7 +83,10 @@ struct ChunkSplit {
   // pass splits each part so, the later passes read the matrices back without splitting again
   // and no part buffer is held: color=dfmf converts the BTF once instead of once per pass. The
   // source's values are lost. Needs channels x rows == the source's rows; the results are bit
-  // for bit those of `split` when both give the same values.
+  // for bit those of `split` when both give the same values. Where every factorization's first
+  // pass sums the same sparse sketch (equal texels, buckets and seed: color=dfmf's three at the
+  // default chroma rank), that pass sketches each texel's column once, its matrices stacked
+  // (column_sketch_sums with a segment per matrix): the same sums, each matrix's energy apart.
   std::function<float*(size_t c, size_t offset)> in_place;
   std::function<void(size_t c, size_t offset, float* B, size_t count)> split_in_place;
   size_t part_values = 0;  // values per matrix in a part; 0: ~8 M (tests take small parts)
