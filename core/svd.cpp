@@ -331,9 +331,9 @@ namespace {
 // chunk of the streamed SVD (its first pass 0.44-0.45 -> 0.42-0.44 s at UBO2003 size, 20 chunks,
 // rank 32, old and new binaries alternating; it now adds its chunks' sums first and multiplies
 // once: column_sketch_sums).
-void sketch_times_gaussian(const float* w, size_t h, const Sketch& sketch, Eigen::Ref<MatrixXf> Y) {
+void sketch_times_gaussian(const float* w, size_t h, const Sketch& sketch, Eigen::Ref<MatrixXf> Y, size_t ldw = 0) {
   constexpr size_t k_piece = 512;
-  const Eigen::Map<const MatrixXf> W(w, Index(h), Index(sketch.S.s));
+  const Eigen::Map<const MatrixXf, 0, Eigen::OuterStride<>> W(w, Index(h), Index(sketch.S.s), Eigen::OuterStride<>(Index(ldw ? ldw : h)));
   const int pieces = int((h + k_piece - 1) / k_piece);
   const SingleThreadedBlas one_blas_thread(pieces > 1);
 #pragma omp parallel for schedule(dynamic, 1) if (pieces > 1)
@@ -385,7 +385,9 @@ void column_sketch_sums(const float* B, size_t m, size_t n, const Sketch& sketch
     for (size_t k = 0; k < e.size(); ++k) energy[k] += e[k];
 }
 
-void column_sketch_finish(const float* W, size_t m, const Sketch& sketch, Eigen::Ref<MatrixXf> Y) { sketch_times_gaussian(W, m, sketch, Y); }
+void column_sketch_finish(const float* W, size_t m, const Sketch& sketch, Eigen::Ref<MatrixXf> Y, size_t ldw) {
+  sketch_times_gaussian(W, m, sketch, Y, ldw);
+}
 
 size_t column_sketch_sums_bytes(size_t m, size_t n, Index l) {
   const size_t s = sketch_buckets(l);

@@ -147,7 +147,8 @@ size_t column_sketch_bytes(size_t m, size_t n, Eigen::Index l);
 // energy[k] += matrix k's ||.||_F^2 (sparse_sign_columns).
 void column_sketch_sums(const float* B, size_t m, size_t n, const Sketch& sketch, float* W, double* energy, size_t first,
                         size_t ldb = 0, size_t segment = 0);
-void column_sketch_finish(const float* W, size_t m, const Sketch& sketch, Eigen::Ref<Eigen::MatrixXf> Y);
+// ldw: W's leading dimension (0: m), e.g. one matrix's rows of a stacked sum.
+void column_sketch_finish(const float* W, size_t m, const Sketch& sketch, Eigen::Ref<Eigen::MatrixXf> Y, size_t ldw = 0);
 size_t column_sketch_sums_bytes(size_t m, size_t n, Eigen::Index l);
 
 // Block Krylov's error-driven stop: after at least two blocks, stop once a block improved the

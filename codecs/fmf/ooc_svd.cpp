@@ -39,13 +39,10 @@ class Krylov {
   const Sketch* summed_sketch() const {
     return m_phase == Phase::sketch && m_sketch.sparse() && m_opt.sketch_sums ? &m_sketch : nullptr;
   }
-  // This pass's sums taken from rows [row0, row0 + m) of a sum over stacked matrices (rows_all
-  // rows, column-major), and its ||B||^2: instead of slice() on every part (streaming_svds).
-  void take_sketch_sums(const float* W, size_t rows_all, size_t row0, double energy) {
-    m_w_sums.resize(m_m * m_sketch.S.s);
-    for (size_t b = 0; b < m_sketch.S.s; ++b) std::copy_n(W + b * rows_all + row0, m_m, m_w_sums.data() + b * m_m);
-    m_energy += energy;
-  }
+  // This pass's sums are the m rows at W (leading dimension ldw: one matrix's rows of a sum over
+  // stacked matrices, held by the caller until pack()), its ||B||^2 `energy`: instead of slice()
+  // on every part (streaming_svds).
+  void use_sketch_sums(const float* W, size_t ldw, double energy) { m_w_ext = W, m_w_ld = ldw, m_energy += energy; }
   // Doubles this pass sums over the processes: Y (m x l; the first pass adds ||B||_F^2), or G.
   size_t payload() const {
     return m_phase == Phase::project ? size_t(m_w * m_w) : m_m * size_t(m_l) + (m_phase == Phase::sketch ? 1 : 0);
@@ -100,11 +97,13 @@ class Krylov {
     m_G += gram_columns(m_wt[c].leftCols(m_w), 0);
   }
   void pack(double* sums) {
-    if (m_phase == Phase::sketch && !m_w_sums.empty()) {  // this process's chunks: Y = (sum of B_c S_c) G
+    if (m_phase == Phase::sketch && (!m_w_sums.empty() || m_w_ext)) {  // this process's chunks: Y = (sum of B_c S_c) G
       m_y.resize(Index(m_m), m_l);
-      column_sketch_finish(m_w_sums.data(), m_m, m_sketch, m_y);
+      if (m_w_ext) column_sketch_finish(m_w_ext, m_m, m_sketch, m_y, m_w_ld);
+      else column_sketch_finish(m_w_sums.data(), m_m, m_sketch, m_y);
       add_into(Eigen::Map<MatrixXd>(sums, Index(m_m), m_l), m_y);
       std::vector<float>().swap(m_w_sums);
+      m_w_ext = nullptr;
     }
     if (m_phase == Phase::sketch) sums[m_m * size_t(m_l)] = m_energy;
     if (m_phase == Phase::project) std::copy(m_G.data(), m_G.data() + m_G.size(), sums);
@@ -207,6 +206,8 @@ class Krylov {
   Sketch m_sketch;  // on the texels
   std::vector<float> m_scratch;  // the sketch's row blocks (dense sketch: column_sketch_product)
   std::vector<float> m_w_sums;   // sparse sketch: B S summed over the owned chunks (m x s)
+  const float* m_w_ext = nullptr;  // or the caller's (use_sketch_sums), leading dimension m_w_ld
+  size_t m_w_ld = 0;
   double m_energy = 0, m_last_err = -1;
   MatrixXd m_P, m_K, m_G;  // the basis (m x kept l), its Gram matrix P^T B B^T P, W W^T
   std::optional<StagedY> m_q;  // this pass's Q, staged once for every part's B^T Q
@@ -315,11 +316,10 @@ Result<std::vector<SvdResult>> streaming_svds(const ChunkSource& src, const std:
       for (size_t i : active) ks[i].end_chunk(c);
     };
     auto pack = [&](double* d) {
-      if (first && stacked) {
-        for (size_t i = 0; i < channels; ++i) ks[i].take_sketch_sums(stacked_w.data(), src.rows(), i * m, stacked_e[i]);
-        std::vector<float>().swap(stacked_w);
-      }
+      if (first && stacked)
+        for (size_t i = 0; i < channels; ++i) ks[i].use_sketch_sums(stacked_w.data() + i * m, src.rows(), stacked_e[i]);
       for (size_t a = 0; a < active.size(); ++a) ks[active[a]].pack(d + off[a]);
+      if (first && stacked) std::vector<float>().swap(stacked_w);
     };
     BTFC_RETURN_IF_ERROR(run.pass(payload, fn, pack));
     // The steps between passes (orthonormalisation, the stopping test) are each factorization's
