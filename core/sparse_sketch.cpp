@@ -276,7 +276,7 @@ void sparse_sign_columns(const float* B, size_t ldb, size_t m, size_t n, const S
                          bool accumulate, size_t segment) {
   // The energy by segments of rows: a piece that crosses a segment's end is added in two calls
   // (the same sums), its squares going to each segment's own total. One segment: as one call.
-  const size_t seg = segment ? segment : std::max<size_t>(1, m), nseg = (m + seg - 1) / seg;
+  const size_t seg = segment ? segment : std::max<size_t>(1, m), nseg = std::max<size_t>(1, (m + seg - 1) / seg);
   auto add = [&](float* acc, const float* piece, size_t i0, size_t rows, bool negative, bool en, double* e) {
     if (!en || nseg == 1) {
       add_piece(acc, piece, rows, negative, en, e[0]);
