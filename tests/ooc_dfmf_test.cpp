@@ -8,6 +8,7 @@
 #include <cmath>
 #include <limits>
 #include <cstring>
+#include <functional>
 #include <random>
 #include <thread>
 
@@ -302,6 +303,32 @@ TEST(StreamingDfmf, ConsumedInputGivesTheSameModel) {
   }
 }
 
+// The two ways of splitting a chunk into 3 matrices of m rows (row r of matrix i in a column:
+// value(column, i, r)): into part buffers (plain), and in place over `kept`, dst's memory (each
+// column's matrices one after the other, through a copy). `splits` (may be null) counts both.
+using SplitValue = std::function<float(const float* col, size_t i, size_t r)>;
+static void set_splits(size_t m, SplitValue value, float* kept, const MatrixChunks& dst, fmf::ChunkSplit& plain, fmf::ChunkSplit& in_place,
+                size_t* splits) {
+  const size_t in_rows = 3 * m;
+  plain.channels = in_place.channels = 3, plain.rows = in_place.rows = m;
+  plain.split = [=](size_t, size_t, const float* B, size_t count, float* const* out) {
+    if (splits) ++*splits;
+    for (size_t t = 0; t < count; ++t)
+      for (size_t r = 0; r < m; ++r)
+        for (size_t i = 0; i < 3; ++i) out[i][t * m + r] = value(B + t * in_rows, i, r);
+  };
+  in_place.in_place = [=, &dst](size_t c, size_t off) { return kept + (dst.chunk_first(c) + off) * in_rows; };
+  in_place.split_in_place = [=](size_t, size_t, float* B, size_t count) {
+    if (splits) ++*splits;
+    std::vector<float> col(in_rows);
+    for (size_t t = 0; t < count; ++t) {
+      for (size_t i = 0; i < 3; ++i)
+        for (size_t r = 0; r < m; ++r) col[i * m + r] = value(B + t * in_rows, i, r);
+      std::copy(col.begin(), col.end(), B + t * in_rows);
+    }
+  };
+}
+
 // ChunkSplit::in_place over chunks and parts of several sizes: the results are those of
 // splitting into part buffers in every pass, bit for bit, each part is split once (the later
 // passes read it back), and each texel's column holds its matrices' columns after the stream.
@@ -315,26 +342,10 @@ TEST(StreamingDfmf, InPlaceSplitKeepsEachPartWhereItWas) {
   auto value = [&](const float* col, size_t i, size_t r) { return col[3 * r + i] * float(i + 1); };
   size_t splits = 0;
   fmf::ChunkSplit plain, in_place;
-  plain.channels = in_place.channels = 3, plain.rows = in_place.rows = m;
-  plain.part_values = in_place.part_values = 3 * m;  // parts of 3 texels: 3 + 3 + 1 in a chunk of 7
-  plain.split = [&](size_t, size_t, const float* B, size_t count, float* const* out) {
-    ++splits;
-    for (size_t t = 0; t < count; ++t)
-      for (size_t r = 0; r < m; ++r)
-        for (size_t i = 0; i < 3; ++i) out[i][t * m + r] = value(B + t * in_rows, i, r);
-  };
   Btf kept = b;
   const MatrixChunks src(b.data(), in_rows, n, 7), dst(kept.data(), in_rows, n, 7);
-  in_place.in_place = [&](size_t c, size_t off) { return kept.data() + (dst.chunk_first(c) + off) * in_rows; };
-  in_place.split_in_place = [&](size_t, size_t, float* B, size_t count) {
-    ++splits;
-    std::vector<float> col(in_rows);
-    for (size_t t = 0; t < count; ++t) {
-      for (size_t i = 0; i < 3; ++i)
-        for (size_t r = 0; r < m; ++r) col[i * m + r] = value(B + t * in_rows, i, r);
-      std::copy(col.begin(), col.end(), B + t * in_rows);
-    }
-  };
+  set_splits(m, value, kept.data(), dst, plain, in_place, &splits);
+  plain.part_values = in_place.part_values = 3 * m;  // parts of 3 texels: 3 + 3 + 1 in a chunk of 7
   Collective one;
   StreamStats st;
   auto want = fmf::streaming_svds(src, owned_chunks(src, 0, 1), &plain, opts, one);
@@ -382,25 +393,10 @@ TEST(StreamingDfmf, StackedSketchGivesEachChannelItsOwnSumsAndEnergy) {
     o.max_rank = 4, o.oversample = 4, o.power_iters = 1, o.method = SvdMethod::randomized;
     ASSERT_TRUE(make_column_sketch(n, 8, o).sparse());
     const std::vector<SvdOptions> opts{o, o, o};
-    auto value = [&](const float* col, size_t i, size_t r) { return col[3 * r + i]; };
     fmf::ChunkSplit plain, in_place;
-    plain.channels = in_place.channels = 3, plain.rows = in_place.rows = m;
-    plain.part_values = in_place.part_values = 200 * m;  // parts of 200 texels in chunks of 300
-    plain.split = [&](size_t, size_t, const float* b, size_t count, float* const* out) {
-      for (size_t t = 0; t < count; ++t)
-        for (size_t r = 0; r < m; ++r)
-          for (size_t i = 0; i < 3; ++i) out[i][t * m + r] = value(b + t * in_rows, i, r);
-    };
     const MatrixChunks src(B.data(), in_rows, n, 300), dst(kept.data(), in_rows, n, 300);
-    in_place.in_place = [&](size_t c, size_t off) { return kept.data() + (dst.chunk_first(c) + off) * in_rows; };
-    in_place.split_in_place = [&](size_t, size_t, float* b, size_t count) {
-      std::vector<float> col(in_rows);
-      for (size_t t = 0; t < count; ++t) {
-        for (size_t i = 0; i < 3; ++i)
-          for (size_t r = 0; r < m; ++r) col[i * m + r] = value(b + t * in_rows, i, r);
-        std::copy(col.begin(), col.end(), b + t * in_rows);
-      }
-    };
+    set_splits(m, [](const float* col, size_t i, size_t r) { return col[3 * r + i]; }, kept.data(), dst, plain, in_place, nullptr);
+    plain.part_values = in_place.part_values = 200 * m;  // parts of 200 texels in chunks of 300
     Collective one;
     auto want = fmf::streaming_svds(src, owned_chunks(src, 0, 1), &plain, opts, one);
     auto got = fmf::streaming_svds(dst, owned_chunks(dst, 0, 1), &in_place, opts, one);
