@@ -31,8 +31,9 @@ void transposed_product(const float* B, size_t m, size_t n, const ConstRefF& Y, 
 
 // Y of B^T Y made ready once for several products with the same Y (the parts and chunks of a
 // pass): the kernels read Y row-major and zero-padded, a copy (1.3 MB at m = 6561, l = 48) that,
-// made by every call, ran on one thread while the other waited, 8 % of a color=dfmf encode's
-// B^T Q passes (docs/benchmarks.md). Holds its own copy: Y may change or go afterwards.
+// made by every call, ran on the calling thread while the other waited: 10-20 % of that thread's
+// time in a color=dfmf encode's B^T Q passes (docs/benchmarks.md). Holds its own copy: Y may
+// change or go afterwards.
 class StagedY {
  public:
   explicit StagedY(const ConstRefF& Y);
