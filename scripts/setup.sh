@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Installs the Debian packages btfc needs. Idempotent: does nothing when all are present.
-# Package list: ../shared/spec/toolchain.md section 1 (+ nlohmann-json, scikit-image for the
+# Package list: ../shared/spec/toolchain.md section 1 (+ nlohmann-json, libdeflate for the CRC-32 of .btfc reads, scikit-image for the
 # SSIM reference script and python3-sklearn for bench/peer_sklearn.sh (issue 24), GoogleTest / Google Benchmark; headless EGL + GLES on Mesa's llvmpipe and
 # glslang for the export checks, toolchain.md section 7; pybind11 and pytest for the Python module;
 # cpp-httplib for `btfc view` and chromium for the web viewer's browser test, issue 21; clang-14
@@ -12,7 +12,7 @@ PACKAGES=(
   build-essential cmake
   libeigen3-dev libopenexr-dev libopenimageio-dev openimageio-tools
   pocl-opencl-icd ocl-icd-opencl-dev opencl-headers opencl-clhpp-headers clinfo
-  libceres-dev libopenblas-dev zlib1g-dev libbz2-dev libzstd-dev libcli11-dev nlohmann-json3-dev
+  libceres-dev libopenblas-dev zlib1g-dev libbz2-dev libzstd-dev libdeflate-dev libcli11-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   python3-numpy python3-skimage python3-matplotlib python3-sklearn
   pybind11-dev python3-dev python3-pytest

@@ -790,11 +790,19 @@ TEST(TensorTest, Conversions) {
 }  // namespace btfc
 
 // Big buffers take the parallel CRC (pieces joined by crc32_combine): the same value as zlib's
-// crc32 in one call, continuing a previous CRC, at sizes that do not split evenly.
+// crc32 in one call, continuing a previous CRC, at sizes that do not split evenly; small ones
+// libdeflate's CRC where the build has it (its vector loop, its tail bytes, at every alignment).
+// An empty piece leaves the CRC as it was, even from a null pointer.
 TEST(ContainerCrc, ParallelCrcEqualsZlib) {
   std::vector<uint8_t> buf((size_t(20) << 20) + 13);
   uint32_t x = 12345;
   for (auto& b : buf) b = uint8_t((x = x * 1103515245u + 12345u) >> 16);
+  const uint32_t head = uint32_t(crc32(0, reinterpret_cast<const Bytef*>("head"), 4));
+  EXPECT_EQ(btfc::crc32_update(head, nullptr, 0), head);
+  EXPECT_EQ(btfc::crc32_update(head, buf.data(), 0), head);
+  for (size_t off : {0, 1, 3, 7})
+    for (size_t n : {size_t(1), size_t(15), size_t(16), size_t(63), size_t(64), size_t(255), size_t(4097)})
+      EXPECT_EQ(btfc::crc32_update(head, buf.data() + off, n), uint32_t(crc32(head, buf.data() + off, uInt(n)))) << off << " " << n;
   for (size_t n : {size_t(100), size_t(8) << 20, buf.size()}) {
     const uint32_t seed = uint32_t(crc32(0, reinterpret_cast<const Bytef*>("head"), 4));
     EXPECT_EQ(btfc::crc32_update(seed, buf.data(), n), uint32_t(crc32(seed, buf.data(), uInt(n)))) << n;
