@@ -97,6 +97,24 @@ class MatrixChunks final : public ChunkSource {
   size_t m_rows, m_texels, m_per;
 };
 
+// How many threads a source's first-sight checks of a chunk (a raw .btfc's CRC and finite test
+// in map() or load()) may use on the calling thread: 1 unless a scope on this thread raised it.
+// The streamed passes map on a helper thread while the GEMMs hold every core, where a second
+// team only competes with them; a sweep that only reads (color=dfmf's offset moments, the first
+// sight of every chunk there) raises it for its own thread, whose cores are otherwise idle.
+class CheckThreads {
+ public:
+  explicit CheckThreads(int n) : m_prev(t_n) { t_n = std::max(1, n); }
+  ~CheckThreads() { t_n = m_prev; }
+  CheckThreads(const CheckThreads&) = delete;
+  CheckThreads& operator=(const CheckThreads&) = delete;
+  static int get() { return t_n; }
+
+ private:
+  int m_prev;
+  static inline thread_local int t_n = 1;
+};
+
 // The chunks process `rank` of `size` owns: a contiguous range, balanced by chunk count.
 inline std::vector<size_t> owned_chunks(const ChunkSource& src, int rank, int size) {
   const size_t n = src.num_chunks();

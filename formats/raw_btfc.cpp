@@ -25,10 +25,12 @@ Status non_finite_error(const std::string& path, const BtfDesc& d, uint64_t texe
 
 // crc32 of v[0, n) continuing `crc`, and (when bad is given) the index of the first non-finite
 // value in *bad (n when none), in 256 KiB blocks: each block is tested while in cache and then
-// CRC-ed, one trip through memory instead of two. Single-threaded on purpose: it runs on the
-// chunk-reader thread while the GEMMs hold both cores; an OpenMP team there measured no faster
-// on the 5 GB benchmark and 2.4x slower when the main thread's BLAS threads spun alongside it.
-uint32_t crc_and_check(uint32_t crc, const float* v, size_t n, size_t* bad) {
+// CRC-ed, one trip through memory instead of two. On one thread unless the caller's scope allows
+// more (CheckThreads, core/chunks.h): it runs on the chunk-reader thread while the GEMMs hold
+// both cores, where an OpenMP team measured no faster on the 5 GB benchmark and 2.4x slower when
+// the main thread's BLAS threads spun alongside it. With T threads, T contiguous pieces, their
+// CRCs joined in order with crc32_combine and the first bad index the smallest piece's.
+uint32_t crc_and_check_serial(uint32_t crc, const float* v, size_t n, size_t* bad) {
   const size_t block = size_t(1) << 16;
   if (bad) *bad = n;
   for (size_t i0 = 0; i0 < n; i0 += block) {
@@ -39,6 +41,25 @@ uint32_t crc_and_check(uint32_t crc, const float* v, size_t n, size_t* bad) {
     }
     crc = crc32_update(crc, v + i0, k * 4);
   }
+  return crc;
+}
+
+uint32_t crc_and_check(uint32_t crc, const float* v, size_t n, size_t* bad) {
+  const size_t threads = size_t(CheckThreads::get()), min_piece = size_t(1) << 20;  // floats
+  if (threads < 2 || n < 2 * min_piece) return crc_and_check_serial(crc, v, n, bad);
+  const size_t pieces = std::min(threads, n / min_piece), per = (n + pieces - 1) / pieces;
+  std::vector<uint32_t> part(pieces, 0);
+  std::vector<size_t> first(pieces, n);
+#pragma omp parallel for num_threads(int(pieces)) schedule(static, 1)
+  for (long long i = 0; i < (long long)pieces; ++i) {
+    const size_t a = size_t(i) * per, k = std::min(per, n - a);
+    size_t b = k;
+    part[size_t(i)] = crc_and_check_serial(0, v + a, k, bad ? &b : nullptr);
+    first[size_t(i)] = b < k ? a + b : n;
+  }
+  if (bad) *bad = *std::min_element(first.begin(), first.end());
+  for (size_t i = 0; i < pieces; ++i)
+    crc = uint32_t(crc32_combine(crc, part[i], z_off_t(std::min(per, n - i * per) * 4)));
   return crc;
 }
 

@@ -156,3 +156,46 @@ TEST(RawChunks, ProcessesMappingTheirOwnChunksJoinTheCrc) {
   }
   std::remove(path.c_str());
 }
+
+// A chunk's first-sight checks on several threads (CheckThreads, as color=dfmf's offset sweep
+// asks for): the file's CRC still matches when clean and fails when one value changed, and of two
+// NaNs in different threads' pieces the error names the first texel, as on one thread.
+TEST(RawChunks, ChecksOnSeveralThreadsJoinTheCrcAndFindTheFirstNaN) {
+  Btf b = synth(95, 95);  // one chunk of 95 lines: 9025 texels x 486 values, four pieces of 1.1 M values
+  const float early = 0.111111f, late = 0.777777f;
+  b.abrdf(20 * 95 + 5)[3] = early;  // texel (5, 20): the first piece
+  b.abrdf(80 * 95 + 7)[9] = late;   // texel (7, 80): the last piece
+  const std::string path = tmp_path("threads.btfc");
+  auto sweep = [&](int threads) -> Status {
+    auto src = open_raw_chunks(path, 95);
+    if (!src.ok()) return src.status();
+    const ChunkSource& s = *src.value();
+    EXPECT_EQ(s.num_chunks(), 1u);
+    EXPECT_GE(s.raw_bytes(0), size_t(4) << 22);
+    const CheckThreads wide(threads);
+    auto p = s.map(0);
+    if (!p.ok()) return p.status();
+    s.unmap(0, *p);
+    Collective one;
+    return s.finish_first_pass(one);
+  };
+  ASSERT_TRUE(write_btf(b, path).ok());
+  for (int t : {1, 2, 4}) EXPECT_TRUE(sweep(t).ok()) << t << " threads: " << sweep(t).message();
+  patch_float(path, late, std::numeric_limits<float>::quiet_NaN());
+  for (int t : {1, 4}) {
+    const Status s = sweep(t);
+    EXPECT_NE(s.message().find("non-finite value at texel (7, 80)"), std::string::npos) << t << ": " << s.message();
+  }
+  patch_float(path, early, std::numeric_limits<float>::infinity());
+  for (int t : {1, 4}) {
+    const Status s = sweep(t);
+    EXPECT_NE(s.message().find("non-finite value at texel (5, 20)"), std::string::npos) << t << ": " << s.message();
+  }
+  ASSERT_TRUE(write_btf(b, path).ok());
+  patch_float(path, late, 0.5f);
+  for (int t : {1, 2, 4}) {
+    const Status s = sweep(t);
+    EXPECT_NE(s.message().find("CRC mismatch"), std::string::npos) << t << ": " << s.message();
+  }
+  std::remove(path.c_str());
+}
