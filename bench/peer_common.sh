@@ -1,12 +1,13 @@
 # Shared by bench/peer_sklearn.sh and bench/peer_sklearn_dfmf.sh (sourced, after `set -euo
 # pipefail`): their options, bench_fmf, a python3 with scikit-learn, and the same OpenBLAS kernels
-# for both sides. Sets BUILD MATRIX WORKDIR RANKS REPEAT KEEP BENCH PY.
+# for both sides. Sets BUILD MATRIX WORKDIR RANKS REPEAT KEEP BTFC_FILE BENCH PY; defines cli_run.
 BUILD=build
 MATRIX=""
 WORKDIR=""
 RANKS="16 32 64"
 REPEAT=2
 KEEP=0
+BTFC_FILE=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --build) BUILD=$2; shift 2 ;;
@@ -15,6 +16,7 @@ while [ $# -gt 0 ]; do
     --ranks) RANKS=$2; shift 2 ;;
     --repeat) REPEAT=$2; shift 2 ;;
     --keep) KEEP=1; shift ;;
+    --btfc) BTFC_FILE=$2; shift 2 ;;
     *) echo "unknown argument $1" >&2; exit 1 ;;
   esac
 done
@@ -30,3 +32,36 @@ done
 # The same OpenBLAS kernels for both: btfc re-executes itself with OPENBLAS_CORETYPE=SkylakeX on
 # CPUs with AVX-512 (core/blas_env.h); numpy gets the same setting here.
 if grep -q avx512vl /proc/cpuinfo && [ -z "${OPENBLAS_CORETYPE:-}" ]; then export OPENBLAS_CORETYPE=SkylakeX; fi
+
+# cli_run WHO SPEC: the command-line encodes of the same BTF as a raw .btfc (--btfc FILE, written
+# by `btfc synth --width 256 --height 256 --seed 1`, the material bench_fmf dumps), i.e. the
+# out-of-core and MPI paths a user runs rather than bench_fmf's streamed SVD over memory: WHO ooc
+# is `btfc compress FILE -c SPEC --max-memory 1G` (the raw .btfc streamed in place), WHO mpi is
+# btfc-mpi on 2 ranks with one core each (each maps its own chunks). Prints "SECONDS PEAK_GB
+# NAME=VALUE..." : the factorization's time (the streamed passes, color=dfmf's offset sweep
+# included), the peak RSS (per rank for mpi) and the model's encode stats.
+cli_run() {
+  mkdir -p "$WORKDIR"
+  local out="$WORKDIR/peer-cli.btfc" js="$WORKDIR/peer-cli.json" info="$WORKDIR/peer-cli-info.json"
+  rm -f "$out"
+  if [ "$1" = ooc ]; then
+    "$BUILD/btfc" --json compress "$BTFC_FILE" -c "$2" -o "$out" --max-memory 1G > "$js"
+    echo '{}' > "$info"
+  else
+    OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \
+      mpirun --bind-to core -n 2 "$BUILD/btfc-mpi" compress "$BTFC_FILE" -c "$2" -o "$out" --max-memory 1G --json > "$js"
+    "$BUILD/btfc" --json info "$out" > "$info"
+  fi
+  "$PY" - "$js" "$info" <<'PYEOF'
+import json, re, sys
+r, info = json.load(open(sys.argv[1])), json.load(open(sys.argv[2]))
+if "out_of_core" in r:
+    x = r["out_of_core"]
+    secs, peak, stats = x["factorize_seconds"], x["peak_rss_bytes"], r["stats"]
+else:
+    secs, peak = r["factorize_seconds"], max(p["peak_rss_bytes"] for p in r["per_rank"])
+    stats = dict(re.findall(r"^(\S+) = (\S+)$", info["encode_stats"], re.M))
+print(f"{secs:.4f} {peak / 1e9:.4f} " + " ".join(f"{k}={v}" for k, v in stats.items()))
+PYEOF
+  rm -f "$out" "$js" "$info"
+}

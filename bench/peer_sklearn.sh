@@ -23,6 +23,12 @@
 #            grid of (q, p), so neither is compared at settings only the other was given. (How
 #            little is enough depends on the spectrum: on tests/svd_test.cpp's harmonic-decay
 #            matrix, q 1 at rank 32 needs p 16 to stay within 1 %, q 2 needs none.)
+#   ooc      with --btfc FILE (the same BTF as a raw .btfc: `btfc synth --width 256 --height 256
+#            --seed 1 -o FILE`): the command line's out-of-core encode, `btfc compress FILE -c
+#            fmf:rank=R:power_iters=1:oversample=P --max-memory 1G` (the raw .btfc streamed in place
+#            from the page cache, its chunks mapped and unmapped in every pass), p 16 and 8
+#   mpi      with --btfc, where btfc-mpi was built: the same on 2 MPI ranks of one core each, p 16
+#            (time: the factorization in the JSON; peak RSS: per rank)
 # Each run is its own process: time of the factorization only (not the load), relative L2 error
 # sqrt(||B||^2 - sum s_i^2) / ||B|| (both approximations are orthogonal projections of B, so this
 # is their exact error), peak RSS (getrusage) over the input's size. Then, per rank, the ratio of
@@ -30,7 +36,7 @@
 # error any run reached at that rank ("equal error").
 #
 # Usage: bench/peer_sklearn.sh [--build DIR] [--matrix FILE] [--workdir DIR] [--ranks "16 32 64"]
-#                              [--repeat 2] [--keep]
+#                              [--repeat 2] [--keep] [--btfc FILE]
 #   --matrix: an existing dump (not removed); else the dump goes to WORKDIR/ubo2003.f32 (default
 #   BUILD/peer-sklearn; needs 5.2 GB) and is removed at the end unless --keep.
 # Needs python3-sklearn (scripts/setup.sh installs it).
@@ -73,6 +79,18 @@ print(f"sklearn    rank {rank} q {q} p {p} {norm}: {secs:.2f} s, rel L2 error {e
 EOF
 }
 bt() { "$BENCH" --load "$MATRIX" --rows "$ROWS" --svd-only --rank "$1" --power-iters "$2" --oversample "$3" --scheme "$4" | grep '^fmf'; }
+cl() {
+  local r
+  r=$(cli_run "$1" "fmf:rank=$2:power_iters=$3:oversample=$4")
+  "$PY" - "$@" "$r" <<'EOF'
+import re, sys
+who, rank, q, p, r = sys.argv[1:6]
+secs, peak = (float(x) for x in r.split()[:2])
+err = float(re.search(r"rel_error\.rgb=([\d.eE+-]+)", r).group(1))
+inp = 19683 * 65536 * 4 / 1e9
+print(f"{who:10s} rank {rank} q {q} p {p} krylov: {secs:.2f} s, rel L2 error {err:.6f}, peak RSS {peak:.2f} GB ({peak / inp:.2f} x input)", flush=True)
+EOF
+}
 st() { "$BENCH" --load "$MATRIX" --rows "$ROWS" --rank "$1" --power-iters "$2" --oversample "$3" --streamed 0 | grep '^streamed'; }
 
 echo "# peer_sklearn.sh: $(date -u +%FT%TZ), $(nproc) cores, load $(cut -d' ' -f1-3 /proc/loadavg), OPENBLAS_CORETYPE=${OPENBLAS_CORETYPE:-default}"
@@ -93,6 +111,11 @@ for rep in $(seq 1 "$REPEAT"); do
       sk "$r" 1 $p LU | tee -a "$LOG"
       st "$r" 1 $p | tee -a "$LOG"
     done
+    if [ -n "$BTFC_FILE" ]; then
+      cl ooc "$r" 1 16 | tee -a "$LOG"
+      cl ooc "$r" 1 8 | tee -a "$LOG"
+      if [ -x "$BUILD/btfc-mpi" ] && command -v mpirun > /dev/null; then cl mpi "$r" 1 16 | tee -a "$LOG"; fi
+    fi
   done
 done
 echo "## summary (medians over the repetitions); equal error = within 1 % of the lowest error at that rank"
@@ -114,7 +137,7 @@ for rank in sorted({k[0] for k in runs}):
         print(f"  {k[1]:8s} {k[2]:6s} q {k[3]} p {k[4]}: {t:7.2f} s  err {e:.6f} ({e / best:.4f} x lowest)  peak {mem:.2f} x input")
     ok = [r for r in rows if r[2] <= 1.01 * best]
     s = [r for r in ok if r[0][1] == "sklearn"]
-    for who, name in (("fmf", "btfc"), ("streamed", "btfc streamed")):
+    for who, name in (("fmf", "btfc"), ("streamed", "btfc streamed"), ("ooc", "btfc out of core (CLI)"), ("mpi", "btfc-mpi 2 ranks")):
         b = [r for r in ok if r[0][1] == who]
         if b and s:
             fb, fs = min(b, key=lambda r: r[1]), min(s, key=lambda r: r[1])

@@ -16,6 +16,11 @@
 #            the conversion are not timed: they favour scikit-learn)
 #   and both with q 1 and p 8 and 4 (btfc `oversample=P`, scikit-learn n_oversamples=P, LU): block
 #            Krylov keeps every block, so it needs less oversampling; both sides get the same grid
+#   ooc, mpi with --btfc FILE (the same BTF as a raw .btfc: `btfc synth --width 256 --height 256
+#            --seed 1 -o FILE`): the command line's out-of-core encode (`btfc compress FILE -c
+#            fmf:rank=R:color=dfmf:power_iters=1:oversample=P --max-memory 1G`, the raw .btfc
+#            streamed in place; p 16 and 8) and btfc-mpi's on 2 ranks of one core each (p 16):
+#            the factorization's time with the offset sweep, peak RSS over the RGB input (per rank)
 # Errors are sqrt(||B||^2 - sum s_i^2) / ||B|| per channel (orthogonal projections: exact). A
 # run is at "equal error" when each of its three channel errors is within 1 % of the lowest any
 # run reached on that channel; the summary gives the ratio of the fastest such btfc run to the
@@ -23,6 +28,7 @@
 # (btfc: the RGB BTF, 5.16 GB; scikit-learn: one channel matrix, the one it holds).
 #
 # Usage: bench/peer_sklearn_dfmf.sh [--build DIR] [--workdir DIR] [--matrix FILE] [--ranks "16 32 64"] [--repeat 2] [--keep]
+#                                   [--btfc FILE]
 #   The channel files go to WORKDIR (default BUILD/peer-sklearn; 5.2 GB) and are removed at the
 #   end unless --keep (an existing set is reused), and so does the RGB matrix btfc reads (5.2 GB,
 #   WORKDIR/ubo2003.f32), unless --matrix names an existing `bench_fmf --dump` of the same BTF
@@ -91,6 +97,18 @@ print(f"btfc       rank $1 q $2 p $p dfmf: {enc:.2f} s, errors {float(st['rel_er
 EOF
 }
 
+cl() {
+  local r
+  r=$(cli_run "$1" "fmf:rank=$2:color=dfmf:power_iters=$3:oversample=$4")
+  "$PY" - "$@" "$r" <<'EOF'
+import re, sys
+who, rank, q, p, r = sys.argv[1:6]
+secs, peak = (float(x) for x in r.split()[:2])
+e = [float(re.search(rf"rel_error\.{c}=([\d.eE+-]+)", r).group(1)) for c in "yuv"]
+inp = 19683 * 65536 * 4 / 1e9
+print(f"{who:10s} rank {rank} q {q} p {p} dfmf: {secs:.2f} s, errors {e[0]:.6f} {e[1]:.6f} {e[2]:.6f}, peak RSS {peak / inp:.2f} x input", flush=True)
+EOF
+}
 echo "# peer_sklearn_dfmf.sh: $(date -u +%FT%TZ), $(nproc) cores, load $(cut -d' ' -f1-3 /proc/loadavg), OPENBLAS_CORETYPE=${OPENBLAS_CORETYPE:-default}"
 echo "# sklearn $("$PY" -c 'import sklearn; print(sklearn.__version__)'), numpy $("$PY" -c 'import numpy; print(numpy.__version__)'), channels $PREFIX.[yuv].f32"
 LOG=$(mktemp)
@@ -106,6 +124,11 @@ for rep in $(seq 1 "$REPEAT"); do
       bt "$r" 1 $p | tee -a "$LOG"
       sk "$r" 1 LU $p | tee -a "$LOG"
     done
+    if [ -n "$BTFC_FILE" ]; then
+      cl ooc "$r" 1 16 | tee -a "$LOG"
+      cl ooc "$r" 1 8 | tee -a "$LOG"
+      if [ -x "$BUILD/btfc-mpi" ] && command -v mpirun > /dev/null; then cl mpi "$r" 1 16 | tee -a "$LOG"; fi
+    fi
   done
 done
 echo "## summary (medians over the repetitions); equal error = every channel within 1 % of its lowest error at that rank"
@@ -127,10 +150,11 @@ for rank in sorted({k[0] for k in runs}):
         worst = max(e[c] / best[c] for c in range(3))
         print(f"  {k[1]:8s} {k[2]:5s} q {k[3]} p {k[4]}: {t:7.2f} s  errors {e[0]:.6f} {e[1]:.6f} {e[2]:.6f} (worst channel {worst:.4f} x lowest)  peak {mem:.2f} x input")
     ok = [r for r in rows if all(r[2][c] <= 1.01 * best[c] for c in range(3))]
-    b = [r for r in ok if r[0][1] == "btfc"]
     s = [r for r in ok if r[0][1] == "sklearn"]
-    if b and s:
-        fb, fs = min(b, key=lambda r: r[1]), min(s, key=lambda r: r[1])
-        print(f"  equal error: btfc q {fb[0][3]} p {fb[0][4]} {fb[1]:.2f} s vs sklearn q {fs[0][3]} p {fs[0][4]} {fs[0][2]} {fs[1]:.2f} s -> ratio {fb[1] / fs[1]:.2f} (goal <= 0.5)")
+    for who, name in (("btfc", "btfc"), ("ooc", "btfc out of core (CLI)"), ("mpi", "btfc-mpi 2 ranks")):
+        b = [r for r in ok if r[0][1] == who]
+        if b and s:
+            fb, fs = min(b, key=lambda r: r[1]), min(s, key=lambda r: r[1])
+            print(f"  equal error: {name} q {fb[0][3]} p {fb[0][4]} {fb[1]:.2f} s vs sklearn q {fs[0][3]} p {fs[0][4]} {fs[0][2]} {fs[1]:.2f} s -> ratio {fb[1] / fs[1]:.2f} (goal <= 0.5)")
 EOF
 rm -f "$LOG"
