@@ -44,6 +44,13 @@ cli_run() {
   mkdir -p "$WORKDIR"
   local out="$WORKDIR/peer-cli.btfc" js="$WORKDIR/peer-cli.json" info="$WORKDIR/peer-cli-info.json"
   rm -f "$out"
+  # The file read afresh into the page cache (dropped first): the state one sequential read leaves
+  # (2 MB folios on this project's kernel), not the one the runs before leave, where memory
+  # pressure evicted parts that the mappings then read back in small folios; on the project's VM
+  # each pass pays ~1 us per freshly mapped 4 KiB page, so that state took 3 x as long
+  # (docs/benchmarks.md, fmf section, seventh session of 2026-12-05).
+  "$PY" -c "import os, sys; fd = os.open(sys.argv[1], os.O_RDONLY); os.posix_fadvise(fd, 0, 0, os.POSIX_FADV_DONTNEED)" "$BTFC_FILE"
+  cat "$BTFC_FILE" > /dev/null
   if [ "$1" = ooc ]; then
     "$BUILD/btfc" --json compress "$BTFC_FILE" -c "$2" -o "$out" --max-memory 1G > "$js"
     echo '{}' > "$info"
