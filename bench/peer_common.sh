@@ -1,6 +1,6 @@
 # Shared by bench/peer_sklearn.sh and bench/peer_sklearn_dfmf.sh (sourced, after `set -euo
 # pipefail`): their options, bench_fmf, a python3 with scikit-learn, and the same OpenBLAS kernels
-# for both sides. Sets BUILD MATRIX WORKDIR RANKS REPEAT KEEP BTFC_FILE BENCH PY; defines cli_run.
+# for both sides. Sets BUILD MATRIX WORKDIR RANKS REPEAT KEEP BTFC_FILE BENCH PY; defines cli_run and cli_line.
 BUILD=build
 MATRIX=""
 WORKDIR=""
@@ -71,4 +71,26 @@ else:
 print(f"{secs:.4f} {peak / 1e9:.4f} " + " ".join(f"{k}={v}" for k, v in stats.items()))
 PYEOF
   rm -f "$out" "$js" "$info"
+}
+
+# cli_line WHO RANK Q P [dfmf]: cli_run's encode at that rank, power_iters and oversample (with
+# color=dfmf when asked) as a line of the calling script's log: peer_sklearn.sh's "WHO rank R q Q
+# p P krylov: T s, rel L2 error E, peak RSS X GB (Y x input)", or peer_sklearn_dfmf.sh's "WHO
+# rank R q Q p P dfmf: T s, errors Ey Eu Ev, peak RSS Y x input".
+cli_line() {
+  local color="" r
+  if [ "${5:-}" = dfmf ]; then color=":color=dfmf"; fi
+  r=$(cli_run "$1" "fmf:rank=$2$color:power_iters=$3:oversample=$4")
+  "$PY" - "$1" "$2" "$3" "$4" "${5:-rgb}" "$r" <<'PYEOF'
+import re, sys
+who, rank, q, p, mode, r = sys.argv[1:7]
+secs, peak = (float(x) for x in r.split()[:2])
+inp = 19683 * 65536 * 4 / 1e9
+err = lambda c: float(re.search(rf"rel_error\.{c}=([\d.eE+-]+)", r).group(1))
+if mode == "dfmf":
+    e = [err(c) for c in "yuv"]
+    print(f"{who:10s} rank {rank} q {q} p {p} dfmf: {secs:.2f} s, errors {e[0]:.6f} {e[1]:.6f} {e[2]:.6f}, peak RSS {peak / inp:.2f} x input", flush=True)
+else:
+    print(f"{who:10s} rank {rank} q {q} p {p} krylov: {secs:.2f} s, rel L2 error {err('rgb'):.6f}, peak RSS {peak:.2f} GB ({peak / inp:.2f} x input)", flush=True)
+PYEOF
 }

@@ -79,18 +79,7 @@ print(f"sklearn    rank {rank} q {q} p {p} {norm}: {secs:.2f} s, rel L2 error {e
 EOF
 }
 bt() { "$BENCH" --load "$MATRIX" --rows "$ROWS" --svd-only --rank "$1" --power-iters "$2" --oversample "$3" --scheme "$4" | grep '^fmf'; }
-cl() {
-  local r
-  r=$(cli_run "$1" "fmf:rank=$2:power_iters=$3:oversample=$4")
-  "$PY" - "$@" "$r" <<'EOF'
-import re, sys
-who, rank, q, p, r = sys.argv[1:6]
-secs, peak = (float(x) for x in r.split()[:2])
-err = float(re.search(r"rel_error\.rgb=([\d.eE+-]+)", r).group(1))
-inp = 19683 * 65536 * 4 / 1e9
-print(f"{who:10s} rank {rank} q {q} p {p} krylov: {secs:.2f} s, rel L2 error {err:.6f}, peak RSS {peak:.2f} GB ({peak / inp:.2f} x input)", flush=True)
-EOF
-}
+cl() { cli_line "$@"; }
 st() { "$BENCH" --load "$MATRIX" --rows "$ROWS" --rank "$1" --power-iters "$2" --oversample "$3" --streamed 0 | grep '^streamed'; }
 
 echo "# peer_sklearn.sh: $(date -u +%FT%TZ), $(nproc) cores, load $(cut -d' ' -f1-3 /proc/loadavg), OPENBLAS_CORETYPE=${OPENBLAS_CORETYPE:-default}"

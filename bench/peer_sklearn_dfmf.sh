@@ -97,18 +97,7 @@ print(f"btfc       rank $1 q $2 p $p dfmf: {enc:.2f} s, errors {float(st['rel_er
 EOF
 }
 
-cl() {
-  local r
-  r=$(cli_run "$1" "fmf:rank=$2:color=dfmf:power_iters=$3:oversample=$4")
-  "$PY" - "$@" "$r" <<'EOF'
-import re, sys
-who, rank, q, p, r = sys.argv[1:6]
-secs, peak = (float(x) for x in r.split()[:2])
-e = [float(re.search(rf"rel_error\.{c}=([\d.eE+-]+)", r).group(1)) for c in "yuv"]
-inp = 19683 * 65536 * 4 / 1e9
-print(f"{who:10s} rank {rank} q {q} p {p} dfmf: {secs:.2f} s, errors {e[0]:.6f} {e[1]:.6f} {e[2]:.6f}, peak RSS {peak / inp:.2f} x input", flush=True)
-EOF
-}
+cl() { cli_line "$@" dfmf; }
 echo "# peer_sklearn_dfmf.sh: $(date -u +%FT%TZ), $(nproc) cores, load $(cut -d' ' -f1-3 /proc/loadavg), OPENBLAS_CORETYPE=${OPENBLAS_CORETYPE:-default}"
 echo "# sklearn $("$PY" -c 'import sklearn; print(sklearn.__version__)'), numpy $("$PY" -c 'import numpy; print(numpy.__version__)'), channels $PREFIX.[yuv].f32"
 LOG=$(mktemp)
