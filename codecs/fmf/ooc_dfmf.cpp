@@ -60,7 +60,8 @@ Status DfmfChannelSource::luminance_moments(const ChunkSource& base, const std::
   std::vector<float> values;
   std::vector<uint8_t> raw;
   // The first sight of every chunk: the source's checks (a raw .btfc's CRC and finite test) on
-  // all threads, nothing else runs meanwhile (1.3 -> 0.5 s on the UBO2003-size BTF, docs/benchmarks.md).
+  // all threads, nothing else runs meanwhile (2.5-3.1 -> 1.6-1.8 s on the UBO2003-size BTF in one
+  // run on a slow stretch of the host; docs/benchmarks.md).
   const CheckThreads wide(omp_get_max_threads());
   for (size_t i = 0; i < chunks.size() && local.ok(); ++i) {
     const size_t c = chunks[i], count = base.chunk_count(c);
