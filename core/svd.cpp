@@ -379,10 +379,11 @@ void column_sketch_product(const float* B, size_t m, size_t n, const Sketch& ske
 
 void column_sketch_sums(const float* B, size_t m, size_t n, const Sketch& sketch, float* W, double* energy, size_t first,
                         size_t ldb, size_t segment) {
-  std::vector<double> e(segment ? std::max<size_t>(1, (m + segment - 1) / segment) : 1, 0.0);
+  const size_t segments = segment ? (m + segment - 1) / segment : 1;  // 0 for m = 0 rows in segments
+  std::vector<double> e(std::max<size_t>(1, segments), 0.0);           // sparse_sign_columns counts one then
   sparse_sign_columns(B, ldb ? ldb : m, m, n, sketch.S, W, energy ? e.data() : nullptr, first, true, segment);
   if (energy)
-    for (size_t k = 0; k < (segment ? (m + segment - 1) / segment : 1); ++k) energy[k] += e[k];  // none for m = 0 rows in segments
+    for (size_t k = 0; k < segments; ++k) energy[k] += e[k];
 }
 
 void column_sketch_finish(const float* W, size_t m, const Sketch& sketch, Eigen::Ref<MatrixXf> Y, size_t ldw) {
