@@ -43,7 +43,7 @@ class Krylov {
   // This pass's sums are the m rows at W (leading dimension ldw: one matrix's rows of a sum over
   // stacked matrices, held by the caller until pack()), its ||B||^2 `energy`: instead of slice()
   // on every part (streaming_svds).
-  void use_sketch_sums(const float* W, size_t ldw, double energy) { m_w_ext = W, m_w_ld = ldw, m_energy += energy; }
+  void use_sketch_sums(const float* W, size_t ldw, double energy) { m_sums_at = W, m_sums_ld = ldw, m_energy += energy; }
   // Doubles this pass sums over the processes: Y (m x l; the first pass adds ||B||_F^2), or G.
   size_t payload() const {
     return m_phase == Phase::project ? size_t(m_w * m_w) : m_m * size_t(m_l) + (m_phase == Phase::sketch ? 1 : 0);
@@ -66,7 +66,7 @@ class Krylov {
     switch (m_phase) {
       case Phase::sketch: {  // Y = B Pi: the chunk's part, through the sparse sign sketch ~ a read
         if (m_sketch.sparse() && m_opt.sketch_sums) {  // W += B S here, Y = W G once, in pack()
-          if (m_w_sums.empty()) m_w_sums.assign(m_m * m_sketch.S.s, 0.0f);
+          if (m_w_sums.empty()) m_w_sums.assign(m_m * m_sketch.S.s, 0.0f), m_sums_at = m_w_sums.data(), m_sums_ld = m_m;
           column_sketch_sums(B, m_m, k, m_sketch, m_w_sums.data(), &m_energy, first + o, ldb);
           break;
         }
@@ -98,13 +98,12 @@ class Krylov {
     m_G += gram_columns(m_wt[c].leftCols(m_w), 0);
   }
   void pack(double* sums) {
-    if (m_phase == Phase::sketch && (!m_w_sums.empty() || m_w_ext)) {  // this process's chunks: Y = (sum of B_c S_c) G
+    if (m_phase == Phase::sketch && m_sums_at) {  // this process's chunks: Y = (sum of B_c S_c) G
       m_y.resize(Index(m_m), m_l);
-      if (m_w_ext) column_sketch_finish(m_w_ext, m_m, m_sketch, m_y, m_w_ld);
-      else column_sketch_finish(m_w_sums.data(), m_m, m_sketch, m_y);
+      column_sketch_finish(m_sums_at, m_m, m_sketch, m_y, m_sums_ld);
       add_into(Eigen::Map<MatrixXd>(sums, Index(m_m), m_l), m_y);
       std::vector<float>().swap(m_w_sums);
-      m_w_ext = nullptr;
+      m_sums_at = nullptr;
     }
     if (m_phase == Phase::sketch) sums[m_m * size_t(m_l)] = m_energy;
     if (m_phase == Phase::project) std::copy(m_G.data(), m_G.data() + m_G.size(), sums);
@@ -206,9 +205,11 @@ class Krylov {
   Phase m_phase = Phase::sketch;
   Sketch m_sketch;  // on the texels
   std::vector<float> m_scratch;  // the sketch's row blocks (dense sketch: column_sketch_product)
-  std::vector<float> m_w_sums;   // sparse sketch: B S summed over the owned chunks (m x s)
-  const float* m_w_ext = nullptr;  // or the caller's (use_sketch_sums), leading dimension m_w_ld
-  size_t m_w_ld = 0;
+  // Sparse sketch: B S summed over the owned chunks (m x s), at m_sums_at with leading dimension
+  // m_sums_ld: m_w_sums (slice()) or the caller's stacked sums (use_sketch_sums); null before either.
+  std::vector<float> m_w_sums;
+  const float* m_sums_at = nullptr;
+  size_t m_sums_ld = 0;
   double m_energy = 0, m_last_err = -1;
   MatrixXd m_P, m_K, m_G;  // the basis (m x kept l), its Gram matrix P^T B B^T P, W W^T
   std::optional<StagedY> m_q;  // this pass's Q, staged once for every part's B^T Q
