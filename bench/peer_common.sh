@@ -81,11 +81,11 @@ cli_line() {
   local color="" r
   if [ "${5:-}" = dfmf ]; then color=":color=dfmf"; fi
   r=$(cli_run "$1" "fmf:rank=$2$color:power_iters=$3:oversample=$4")
-  "$PY" - "$1" "$2" "$3" "$4" "${5:-rgb}" "$r" <<'PYEOF'
-import re, sys
-who, rank, q, p, mode, r = sys.argv[1:7]
+  "$PY" - "$1" "$2" "$3" "$4" "${5:-rgb}" "$r" "$BTFC_FILE" <<'PYEOF'
+import os, re, sys
+who, rank, q, p, mode, r, path = sys.argv[1:8]
 secs, peak = (float(x) for x in r.split()[:2])
-inp = 19683 * 65536 * 4 / 1e9
+inp = os.path.getsize(path) / 1e9  # the raw .btfc: its float tensor and a header of a few KB
 err = lambda c: float(re.search(rf"rel_error\.{c}=([\d.eE+-]+)", r).group(1))
 if mode == "dfmf":
     e = [err(c) for c in "yuv"]
