@@ -98,6 +98,14 @@ class RawChunks final : public ChunkSource {
     std::memcpy(dst, raw, raw_bytes(c));
     return {};
   }
+  // The pread fallback reads straight into the caller's float block: the file's bytes are the
+  // block's already, so the raw buffer and the second copy read() + decode() would make are
+  // saved (a chunk's worth of memory, and a copy of the whole file per pass).
+  Status load(size_t c, void*, float* dst) const override {
+    BTFC_RETURN_IF_ERROR(m_b.pread_texels(chunk_first(c), chunk_count(c), dst));
+    return verify(c, dst);
+  }
+  size_t raw_buffer_bytes(size_t) const override { return 0; }
   bool mappable() const override { return m_mappable; }
   Result<const float*> map(size_t c) const override {
     const uint64_t off = chunk_offset(c), base = off / m_page * m_page;

@@ -11,6 +11,7 @@
 #include <iterator>
 #include <limits>
 #include <thread>
+#include <vector>
 
 #include "codecs/fmf/ooc_svd.h"
 #include "core/synth.h"
@@ -43,6 +44,26 @@ class Copying final : public ChunkSource {
   size_t raw_bytes(size_t c) const override { return m_s.raw_bytes(c); }
   Status read(size_t c, void* raw) const override { return m_s.read(c, raw); }
   Status decode(size_t c, const void* raw, float* dst) const override { return m_s.decode(c, raw, dst); }
+  Status finish_first_pass(Collective& coll) const override { return m_s.finish_first_pass(coll); }
+
+ private:
+  const ChunkSource& m_s;
+};
+
+// The same chunks through load(): the pread fallback a source that cannot map takes (RawChunks
+// reads straight into the float block, no raw buffer).
+class Loading final : public ChunkSource {
+ public:
+  explicit Loading(const ChunkSource& s) : m_s(s) {}
+  size_t rows() const override { return m_s.rows(); }
+  size_t num_chunks() const override { return m_s.num_chunks(); }
+  size_t chunk_first(size_t c) const override { return m_s.chunk_first(c); }
+  size_t chunk_count(size_t c) const override { return m_s.chunk_count(c); }
+  size_t raw_bytes(size_t c) const override { return m_s.raw_bytes(c); }
+  Status read(size_t, void*) const override { return unsupported("Loading: read() is not the path under test"); }
+  Status decode(size_t, const void*, float*) const override { return unsupported("Loading: decode()"); }
+  Status load(size_t c, void* raw, float* dst) const override { return m_s.load(c, raw, dst); }
+  size_t raw_buffer_bytes(size_t c) const override { return m_s.raw_buffer_bytes(c); }
   Status finish_first_pass(Collective& coll) const override { return m_s.finish_first_pass(coll); }
 
  private:
@@ -95,6 +116,23 @@ TEST(RawChunks, MappedChunksHoldTheFileAndFactorizeAsTheCopies) {
   EXPECT_EQ(mapped->U, copied->U);
   EXPECT_EQ(mapped->SxV, copied->SxV);
   EXPECT_GT(mapped->S(0), 0.0f);
+  // load() straight into the block: no raw buffer, the same chunks and the same factorization.
+  auto third = open_raw_chunks(path, 2);
+  ASSERT_TRUE(third.ok());
+  Loading loading(*third.value());
+  EXPECT_EQ(loading.raw_buffer_bytes(0), 0u);
+  for (size_t c = 0; c < loading.num_chunks(); ++c) {
+    std::vector<float> block(loading.rows() * loading.chunk_count(c), -1.f);
+    ASSERT_TRUE(loading.load(c, nullptr, block.data()).ok()) << "chunk " << c;
+    EXPECT_EQ(std::memcmp(block.data(), b.abrdf(loading.chunk_first(c)), loading.raw_bytes(c)), 0) << "chunk " << c;
+  }
+  auto fourth = open_raw_chunks(path, 2);
+  ASSERT_TRUE(fourth.ok());
+  Loading loading2(*fourth.value());
+  auto loaded = fmf::streaming_svd(loading2, owned_chunks(loading2, 0, 1), options(), one);
+  ASSERT_TRUE(loaded.ok()) << loaded.status().message();
+  EXPECT_EQ(mapped->U, loaded->U);
+  EXPECT_EQ(mapped->SxV, loaded->SxV);
   std::remove(path.c_str());
 }
 
@@ -107,14 +145,16 @@ TEST(RawChunks, NaNAndFlippedBitAreErrorsWhetherMappedOrCopied) {
     const std::string path = tmp_path(std::string(kind) + ".btfc");
     ASSERT_TRUE(write_btf(b, path).ok());
     patch_float(path, marker, std::string(kind) == "nan" ? std::numeric_limits<float>::quiet_NaN() : 0.5f);
-    for (bool map : {true, false}) {
+    for (int way : {0, 1, 2}) {  // mapped, read() + decode(), load()
+      const bool map = way == 0;
       auto src = open_raw_chunks(path, 2);
       ASSERT_TRUE(src.ok()) << src.status().message();
       Copying copying(*src.value());
-      const ChunkSource& s = map ? *src.value() : static_cast<const ChunkSource&>(copying);
+      Loading loading(*src.value());
+      const ChunkSource& s = map ? *src.value() : way == 1 ? static_cast<const ChunkSource&>(copying) : loading;
       Collective one;
       auto r = fmf::streaming_svd(s, owned_chunks(s, 0, 1), options(), one);
-      ASSERT_FALSE(r.ok()) << kind << (map ? " mapped" : " copied");
+      ASSERT_FALSE(r.ok()) << kind << " way " << way;
       EXPECT_EQ(r.status().code(), StatusCode::corrupt_data);
       const std::string want = std::string(kind) == "nan" ? "non-finite value at texel (3, 6)" : "CRC mismatch";
       EXPECT_NE(r.status().message().find(want), std::string::npos) << r.status().message();
