@@ -92,20 +92,13 @@ uint32_t crc_piece(uint32_t crc, const uint8_t* b, uint64_t n) {
 #endif
 }
 
-// Big buffers are split over the OpenMP threads and the pieces' CRCs joined with crc32_combine.
+// Big buffers are split over the OpenMP threads (crc32_in_pieces).
 uint32_t crc_update(uint32_t crc, const void* p, uint64_t n) {
   auto* b = static_cast<const uint8_t*>(p);
   const int threads = omp_in_parallel() ? 1 : omp_get_max_threads();
   if (threads > 1 && n >= (uint64_t(8) << 20)) {
-    const uint64_t piece = std::min<uint64_t>((n + uint64_t(threads) - 1) / uint64_t(threads), uint64_t(1) << 30);
-    const int64_t pieces = int64_t((n + piece - 1) / piece);
-    std::vector<uint32_t> part(size_t(pieces), 0);
-#pragma omp parallel for schedule(static)
-    for (int64_t i = 0; i < pieces; ++i)
-      part[size_t(i)] = crc_piece(0, b + uint64_t(i) * piece, std::min(piece, n - uint64_t(i) * piece));
-    for (int64_t i = 0; i < pieces; ++i)
-      crc = uint32_t(crc32_combine(crc, part[size_t(i)], z_off_t(std::min(piece, n - uint64_t(i) * piece))));
-    return crc;
+    const uint64_t per = std::min<uint64_t>((n + uint64_t(threads) - 1) / uint64_t(threads), uint64_t(1) << 30);
+    return crc32_in_pieces(crc, n, per, threads, [&](uint64_t, uint64_t at, uint64_t bytes) { return crc_piece(0, b + at, bytes); });
   }
   return crc_piece(crc, b, n);
 }
@@ -862,5 +855,23 @@ Result<Btf> load_raw_btf(const ContainerReader& reader) {
 const char* btfc_version() { return BTFC_VERSION; }
 
 uint32_t crc32_update(uint32_t crc, const void* p, uint64_t n) { return crc_update(crc, p, n); }
+
+uint32_t crc32_in_pieces(uint32_t crc, uint64_t n, uint64_t per, int threads,
+                         const std::function<uint32_t(uint64_t i, uint64_t at, uint64_t bytes)>& part) {
+  if (n == 0) return crc;
+  per = std::max<uint64_t>(per, 1);
+  const int64_t pieces = int64_t((n + per - 1) / per);
+  std::vector<uint32_t> crcs(size_t(pieces), 0);
+#pragma omp parallel for num_threads(int(std::clamp<int64_t>(threads, 1, pieces))) schedule(static)
+  for (int64_t i = 0; i < pieces; ++i) {
+    const uint64_t at = uint64_t(i) * per;
+    crcs[size_t(i)] = part(uint64_t(i), at, std::min(per, n - at));
+  }
+  for (int64_t i = 0; i < pieces; ++i) {
+    const uint64_t at = uint64_t(i) * per;
+    crc = uint32_t(crc32_combine(crc, crcs[size_t(i)], z_off_t(std::min(per, n - at))));
+  }
+  return crc;
+}
 
 }  // namespace btfc

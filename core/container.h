@@ -164,7 +164,15 @@ Result<Btf> load_raw_btf(const ContainerReader& reader);
 const char* btfc_version();
 
 // zlib's crc32 of n bytes continuing `crc`, for any n; buffers of 8 MiB and more are split over
-// the OpenMP threads (crc32_combine joins the pieces).
+// the OpenMP threads (crc32_in_pieces).
 uint32_t crc32_update(uint32_t crc, const void* p, uint64_t n);
+
+// `crc` continued over n bytes cut into contiguous pieces of `per` bytes (the last one shorter):
+// part(i, at, bytes) gives piece i's own CRC (from 0) of bytes [at, at + bytes), computed on up
+// to `threads` OpenMP threads, and the pieces are joined in order with crc32_combine. The one
+// way btfc splits a CRC over threads (crc32_update; a raw .btfc's checks, which test the values
+// of each piece while it is in cache).
+uint32_t crc32_in_pieces(uint32_t crc, uint64_t n, uint64_t per, int threads,
+                         const std::function<uint32_t(uint64_t i, uint64_t at, uint64_t bytes)>& part);
 
 }  // namespace btfc

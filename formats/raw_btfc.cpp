@@ -28,8 +28,8 @@ Status non_finite_error(const std::string& path, const BtfDesc& d, uint64_t texe
 // CRC-ed, one trip through memory instead of two. On one thread unless the caller's scope allows
 // more (CheckThreads, core/chunks.h): it runs on the chunk-reader thread while the GEMMs hold
 // both cores, where an OpenMP team measured no faster on the 5 GB benchmark and 2.4x slower when
-// the main thread's BLAS threads spun alongside it. With T threads, T contiguous pieces, their
-// CRCs joined in order with crc32_combine and the first bad index the smallest piece's.
+// the main thread's BLAS threads spun alongside it. With T threads, T contiguous pieces
+// (crc32_in_pieces, core/container.h), the first bad index the smallest piece's.
 uint32_t crc_and_check_serial(uint32_t crc, const float* v, size_t n, size_t* bad) {
   const size_t block = size_t(1) << 16;
   if (bad) *bad = n;
@@ -48,18 +48,15 @@ uint32_t crc_and_check(uint32_t crc, const float* v, size_t n, size_t* bad) {
   const size_t threads = size_t(CheckThreads::get()), min_piece = size_t(1) << 20;  // floats
   if (threads < 2 || n < 2 * min_piece) return crc_and_check_serial(crc, v, n, bad);
   const size_t pieces = std::min(threads, n / min_piece), per = (n + pieces - 1) / pieces;
-  std::vector<uint32_t> part(pieces, 0);
   std::vector<size_t> first(pieces, n);
-#pragma omp parallel for num_threads(int(pieces)) schedule(static, 1)
-  for (long long i = 0; i < (long long)pieces; ++i) {
-    const size_t a = size_t(i) * per, k = std::min(per, n - a);
+  crc = crc32_in_pieces(crc, uint64_t(n) * 4, uint64_t(per) * 4, int(pieces), [&](uint64_t i, uint64_t at, uint64_t bytes) {
+    const size_t a = size_t(at / 4), k = size_t(bytes / 4);
     size_t b = k;
-    part[size_t(i)] = crc_and_check_serial(0, v + a, k, bad ? &b : nullptr);
+    const uint32_t c = crc_and_check_serial(0, v + a, k, bad ? &b : nullptr);
     first[size_t(i)] = b < k ? a + b : n;
-  }
+    return c;
+  });
   if (bad) *bad = *std::min_element(first.begin(), first.end());
-  for (size_t i = 0; i < pieces; ++i)
-    crc = uint32_t(crc32_combine(crc, part[i], z_off_t(std::min(per, n - i * per) * 4)));
   return crc;
 }
 

@@ -10,6 +10,7 @@
 #include <unistd.h>
 #include <zlib.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -807,4 +808,20 @@ TEST(ContainerCrc, ParallelCrcEqualsZlib) {
     const uint32_t seed = uint32_t(crc32(0, reinterpret_cast<const Bytef*>("head"), 4));
     EXPECT_EQ(btfc::crc32_update(seed, buf.data(), n), uint32_t(crc32(seed, buf.data(), uInt(n)))) << n;
   }
+  // The split itself, any piece size and thread count: pieces in order, the last one short,
+  // each piece seen once, nothing when there are no bytes.
+  const size_t n = 100003;
+  for (uint64_t per : {uint64_t(1) << 10, uint64_t(7777), uint64_t(n - 1), uint64_t(n), uint64_t(n + 5)})
+    for (int threads : {1, 2, 3}) {
+      std::vector<int> seen((n + per - 1) / per, 0);
+      const uint32_t got = btfc::crc32_in_pieces(head, n, per, threads, [&](uint64_t i, uint64_t at, uint64_t bytes) {
+        ++seen[size_t(i)];
+        EXPECT_EQ(at, i * per);
+        EXPECT_EQ(bytes, std::min<uint64_t>(per, n - at));
+        return uint32_t(crc32(0, buf.data() + at, uInt(bytes)));
+      });
+      EXPECT_EQ(got, uint32_t(crc32(head, buf.data(), uInt(n)))) << per << " " << threads;
+      EXPECT_EQ(std::count(seen.begin(), seen.end(), 1), std::ptrdiff_t(seen.size())) << per << " " << threads;
+    }
+  EXPECT_EQ(btfc::crc32_in_pieces(head, 0, 64, 2, [](uint64_t, uint64_t, uint64_t) { return 0u; }), head);
 }
