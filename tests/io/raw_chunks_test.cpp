@@ -33,10 +33,12 @@ Btf synth(int w, int h) {
   return synthesize_btf(o).value();
 }
 
-// The same chunks through read() + decode(): what the mapped path replaces.
-class Copying final : public ChunkSource {
+// The same chunks unmapped (mappable() false): through read() + decode() (`via_load` false:
+// what the mapped path replaces), or through load() (true: the pread fallback a source that
+// cannot map takes; RawChunks reads straight into the float block, without a raw buffer).
+class Unmapped final : public ChunkSource {
  public:
-  explicit Copying(const ChunkSource& s) : m_s(s) {}
+  Unmapped(const ChunkSource& s, bool via_load) : m_s(s), m_load(via_load) {}
   size_t rows() const override { return m_s.rows(); }
   size_t num_chunks() const override { return m_s.num_chunks(); }
   size_t chunk_first(size_t c) const override { return m_s.chunk_first(c); }
@@ -44,30 +46,15 @@ class Copying final : public ChunkSource {
   size_t raw_bytes(size_t c) const override { return m_s.raw_bytes(c); }
   Status read(size_t c, void* raw) const override { return m_s.read(c, raw); }
   Status decode(size_t c, const void* raw, float* dst) const override { return m_s.decode(c, raw, dst); }
+  Status load(size_t c, void* raw, float* dst) const override {
+    return m_load ? m_s.load(c, raw, dst) : ChunkSource::load(c, raw, dst);  // the latter: read() + decode()
+  }
+  size_t raw_buffer_bytes(size_t c) const override { return m_load ? m_s.raw_buffer_bytes(c) : m_s.raw_bytes(c); }
   Status finish_first_pass(Collective& coll) const override { return m_s.finish_first_pass(coll); }
 
  private:
   const ChunkSource& m_s;
-};
-
-// The same chunks through load(): the pread fallback a source that cannot map takes (RawChunks
-// reads straight into the float block, no raw buffer).
-class Loading final : public ChunkSource {
- public:
-  explicit Loading(const ChunkSource& s) : m_s(s) {}
-  size_t rows() const override { return m_s.rows(); }
-  size_t num_chunks() const override { return m_s.num_chunks(); }
-  size_t chunk_first(size_t c) const override { return m_s.chunk_first(c); }
-  size_t chunk_count(size_t c) const override { return m_s.chunk_count(c); }
-  size_t raw_bytes(size_t c) const override { return m_s.raw_bytes(c); }
-  Status read(size_t, void*) const override { return unsupported("Loading: read() is not the path under test"); }
-  Status decode(size_t, const void*, float*) const override { return unsupported("Loading: decode()"); }
-  Status load(size_t c, void* raw, float* dst) const override { return m_s.load(c, raw, dst); }
-  size_t raw_buffer_bytes(size_t c) const override { return m_s.raw_buffer_bytes(c); }
-  Status finish_first_pass(Collective& coll) const override { return m_s.finish_first_pass(coll); }
-
- private:
-  const ChunkSource& m_s;
+  bool m_load;
 };
 
 // Overwrites the first occurrence of `marker`'s bytes in the file with `value`'s.
@@ -109,7 +96,7 @@ TEST(RawChunks, MappedChunksHoldTheFileAndFactorizeAsTheCopies) {
   ASSERT_TRUE(mapped.ok()) << mapped.status().message();
   auto again = open_raw_chunks(path, 2);
   ASSERT_TRUE(again.ok());
-  Copying copying(*again.value());
+  Unmapped copying(*again.value(), false);
   ASSERT_FALSE(copying.mappable());
   auto copied = fmf::streaming_svd(copying, owned_chunks(copying, 0, 1), options(), one);
   ASSERT_TRUE(copied.ok()) << copied.status().message();
@@ -119,7 +106,7 @@ TEST(RawChunks, MappedChunksHoldTheFileAndFactorizeAsTheCopies) {
   // load() straight into the block: no raw buffer, the same chunks and the same factorization.
   auto third = open_raw_chunks(path, 2);
   ASSERT_TRUE(third.ok());
-  Loading loading(*third.value());
+  Unmapped loading(*third.value(), true);
   EXPECT_EQ(loading.raw_buffer_bytes(0), 0u);
   for (size_t c = 0; c < loading.num_chunks(); ++c) {
     std::vector<float> block(loading.rows() * loading.chunk_count(c), -1.f);
@@ -128,7 +115,7 @@ TEST(RawChunks, MappedChunksHoldTheFileAndFactorizeAsTheCopies) {
   }
   auto fourth = open_raw_chunks(path, 2);
   ASSERT_TRUE(fourth.ok());
-  Loading loading2(*fourth.value());
+  Unmapped loading2(*fourth.value(), true);
   auto loaded = fmf::streaming_svd(loading2, owned_chunks(loading2, 0, 1), options(), one);
   ASSERT_TRUE(loaded.ok()) << loaded.status().message();
   EXPECT_EQ(mapped->U, loaded->U);
@@ -149,8 +136,7 @@ TEST(RawChunks, NaNAndFlippedBitAreErrorsWhetherMappedOrCopied) {
       const bool map = way == 0;
       auto src = open_raw_chunks(path, 2);
       ASSERT_TRUE(src.ok()) << src.status().message();
-      Copying copying(*src.value());
-      Loading loading(*src.value());
+      Unmapped copying(*src.value(), false), loading(*src.value(), true);
       const ChunkSource& s = map ? *src.value() : way == 1 ? static_cast<const ChunkSource&>(copying) : loading;
       Collective one;
       auto r = fmf::streaming_svd(s, owned_chunks(s, 0, 1), options(), one);
