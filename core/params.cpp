@@ -2,6 +2,7 @@
 
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <set>
 #include <sstream>
@@ -127,6 +128,12 @@ Result<Params> with_value(const Params& p, const std::string& key, const std::st
   for (const auto& [k, v] : spec.values) text += ":" + k + "=" + v;
   BTFC_ASSIGN_OR_RETURN(SpecString again, parse_spec_string(text));
   return bind_params(again, table);
+}
+
+std::string real_string(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.6g", v);
+  return buf;
 }
 
 }  // namespace btfc

@@ -63,4 +63,7 @@ Result<Params> with_value(const Params& p, const std::string& key, const std::st
 // One line per parameter: "  rank  int [1, 4096] default 32  -- help".
 std::string describe_params(std::span<const ParamSpec> table);
 
+// A real value for a message: "%.6g" (std::to_string's fixed "%f" shows 1.2e-07 as 0.000000).
+std::string real_string(double v);
+
 }  // namespace btfc

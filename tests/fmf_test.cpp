@@ -228,6 +228,34 @@ TEST(Fmf, HdrRangeSurvivesHalfStorage) {
   }
 }
 
+TEST(Fmf, DfmfAutoOffsetScalesWithTheData) {
+  // The automatic offset e = sum Y^2 / sum Y scales with the data, down to 1e-6-size values (it
+  // used to stop at Bonn's 1e-5, which dwarfed such luminances: Y' = log(Y + e) then barely
+  // moved and its half floats' steps made 10-30 % errors). A BTF times 1e-6 and times 1e6 shift
+  // Y' by -+13.8 alike, so their half-stored models err alike.
+  Btf base = random_btf(make_desc(8, 8, 5, 4), 3, 0.7, 0.0, 2.0, 12);
+  for (size_t i = 0; i < base.size(); ++i) base.data()[i] = std::fabs(base.data()[i]);
+  double err[3], e[3];
+  const double scales[3] = {1e-6, 1.0, 1e6};
+  for (int k = 0; k < 3; ++k) {
+    Btf b = base;
+    for (size_t i = 0; i < b.size(); ++i) b.data()[i] = float(double(base.data()[i]) * scales[k]);
+    auto m = encode_spec(b, "fmf:color=dfmf:rank=16:chroma_rank=16");
+    const std::string& spec = m->spec();
+    const size_t at = spec.find("offset=");
+    ASSERT_NE(at, std::string::npos) << spec;
+    e[k] = std::atof(spec.c_str() + at + 7);
+    Btf out;
+    ASSERT_TRUE(m->decode_all(out).ok());
+    err[k] = std::sqrt(sq_error(b, out) / as_matrix(b).squaredNorm());
+    std::printf("scale %g: offset %.6g, relative L2 %.4g\n", scales[k], e[k], err[k]);
+  }
+  EXPECT_NEAR(e[0] / e[1], 1e-6, 1e-11);
+  EXPECT_NEAR(e[2] / e[1], 1e6, 1e-1);
+  EXPECT_GE(err[0], 0.75 * err[2]);
+  EXPECT_LE(err[0], err[2] / 0.75);
+}
+
 TEST(Fmf, NonFiniteInputIsAnError) {
   // color=dfmf with the automatic offset checks on its moments pass (fmf.cpp), the others first.
   for (const char* spec : {"fmf", "fmf:color=dfmf", "fmf:color=dfmf:offset=0.5"})

@@ -131,8 +131,8 @@ size_t dfmf_channel(const float* abrdf, size_t rows, int k, float offset, float*
 // itself for sums that are not normal finite floats).
 size_t dfmf_channels(const float* abrdf, size_t rows, float offset, float* y, float* u, float* v);
 // The automatic offset (offset=0): adds one texel's sum of Y and of Y^2 (Y clamped to >= 0) to
-// *sum_y, *sum_y2; dfmf_auto_offset turns the BTF's sums into e = sum Y^2 / sum Y (1e-5 when
-// that is smaller or undefined). The streamed encode sums the same way over its chunks. Returns
+// *sum_y, *sum_y2; dfmf_auto_offset turns the BTF's sums into e = sum Y^2 / sum Y (Bonn's 1e-5
+// when there is no luminance; at least the smallest normal float). The streamed encode sums the same way over its chunks. Returns
 // true when a luminance was NaN or inf: whenever a value is (Btf::check_finite then names it: the
 // in-core encode's input check rides on this pass), and for finite values only if their weighted
 // sum rounds past the largest float (the Y weights are positive and sum to 1).

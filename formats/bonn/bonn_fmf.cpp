@@ -5,6 +5,7 @@
 #include <cstring>
 
 #include "codecs/fmf/fmf.h"
+#include "core/params.h"
 #include "formats/bonn/bonn_io.h"
 
 namespace btfc {
@@ -183,7 +184,7 @@ Status write_bonn_dfmf(const Model& model, const std::string& path, bool half, c
   const int cm = fv.per_channel ? fv.bonn_color_model : 0;
   // Bonn's readers decode colour model 11 with the offset 1e-5, which the file cannot carry.
   if (fv.per_channel && cm == 11 && fv.drr_eps != 1e-5f)
-    return unsupported(path + ": the dfmf model's luminance offset is " + std::to_string(fv.drr_eps) +
+    return unsupported(path + ": the dfmf model's luminance offset is " + real_string(fv.drr_eps) +
                        ", Bonn's colour model 11 fixes it at 1e-5 (readers would decode other values): encode with "
                        "fmf:color=dfmf:offset=1e-5 for a Bonn DFMF, or keep the model as .btfc");
   int cmax = 0;

@@ -2,6 +2,7 @@
 #include "formats/bsvtf/bsvtf_export.h"
 
 #include "codecs/fmf/fmf.h"
+#include "core/params.h"
 
 namespace btfc {
 
@@ -13,7 +14,7 @@ bool attach_bsvtf(gpu::ExportBundle& bundle, const Model& model, const gpu::Expo
     // The textures hold any offset (evaluation.luminance_offset); the pinned BSVTF format holds
     // colour model 11's only, so the export goes on without it rather than failing.
     bundle.warnings.push_back("model.bsvtf not written: BSVTF stores Bonn's colour model 11 (luminance offset 1e-5) only, this dfmf model's offset is " +
-                              std::to_string(fv->drr_eps) + " (encode with fmf:color=dfmf:offset=1e-5 for a BSVTF file)");
+                              real_string(fv->drr_eps) + " (encode with fmf:color=dfmf:offset=1e-5 for a BSVTF file)");
     return false;
   }
   bundle.write_extra = [&model, opt, bo, report](const std::string& dir) -> Result<nlohmann::json> {

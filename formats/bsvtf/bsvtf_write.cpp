@@ -13,6 +13,7 @@
 #include "formats/bsvtf/bsvtf.h"
 #include "core/dct.h"
 #include "codecs/fmf/fmf.h"
+#include "core/params.h"
 
 namespace btfc {
 
@@ -177,7 +178,7 @@ Status write_bsvtf(const Model& model, const BsvtfOptions& opt, const std::strin
     return unsupported(path + ": the fmf model uses Bonn colour model " + std::to_string(f.bonn_color_model) +
                        "; BSVTF stores FMF rgb (model 0) and DFMF (model 11) models only");
   if (f.per_channel && f.drr_eps != 1e-5f)
-    return unsupported(path + ": the dfmf model's luminance offset is " + std::to_string(f.drr_eps) +
+    return unsupported(path + ": the dfmf model's luminance offset is " + real_string(f.drr_eps) +
                        "; BSVTF stores Bonn's colour model 11 (offset 1e-5) only: encode with fmf:color=dfmf:offset=1e-5");
   if (opt.quality < 1 || opt.quality > 100) return invalid_argument(path + ": quality " + std::to_string(opt.quality) + " outside [1, 100]");
   auto geo = Geometry::make(desc.width, desc.height, opt.tile, opt.border, 4);
