@@ -231,7 +231,7 @@ TEST(Fmf, HdrRangeSurvivesHalfStorage) {
 TEST(Fmf, DfmfAutoOffsetScalesWithTheData) {
   // The automatic offset e = sum Y^2 / sum Y scales with the data, down to 1e-6-size values (it
   // used to stop at Bonn's 1e-5, which dwarfed such luminances: Y' = log(Y + e) then barely
-  // moved and its half floats' steps made 10-30 % errors). A BTF times 1e-6 and times 1e6 shift
+  // moved and its half floats' steps made 13-27 % errors). A BTF times 1e-6 and times 1e6 shift
   // Y' by -+13.8 alike, so their half-stored models err alike.
   Btf base = random_btf(make_desc(8, 8, 5, 4), 3, 0.7, 0.0, 2.0, 12);
   for (size_t i = 0; i < base.size(); ++i) base.data()[i] = std::fabs(base.data()[i]);

@@ -132,10 +132,11 @@ size_t dfmf_channel(const float* abrdf, size_t rows, int k, float offset, float*
 size_t dfmf_channels(const float* abrdf, size_t rows, float offset, float* y, float* u, float* v);
 // The automatic offset (offset=0): adds one texel's sum of Y and of Y^2 (Y clamped to >= 0) to
 // *sum_y, *sum_y2; dfmf_auto_offset turns the BTF's sums into e = sum Y^2 / sum Y (Bonn's 1e-5
-// when there is no luminance; at least the smallest normal float). The streamed encode sums the same way over its chunks. Returns
-// true when a luminance was NaN or inf: whenever a value is (Btf::check_finite then names it: the
-// in-core encode's input check rides on this pass), and for finite values only if their weighted
-// sum rounds past the largest float (the Y weights are positive and sum to 1).
+// when there is no luminance; at least the smallest normal float). The streamed encode sums the
+// same way over its chunks. Returns true when a luminance was NaN or inf: whenever a value is
+// (Btf::check_finite then names it: the in-core encode's input check rides on this pass), and for
+// finite values only if their weighted sum rounds past the largest float (the Y weights are
+// positive and sum to 1).
 bool dfmf_luminance_moments(const float* abrdf, size_t rows, double* sum_y, double* sum_y2);
 double dfmf_auto_offset(double sum_y, double sum_y2);
 // The portable builds of the two loops above, which this CPU's kernels (AVX2 or AVX-512) are

@@ -539,7 +539,7 @@ bool dfmf_luminance_moments_avx2(const float* abrdf, size_t rows, double* sum_y,
 double dfmf_auto_offset(double sum_y, double sum_y2) {
   // No floor at Bonn's 1e-5: on data scaled below it (HDR stored in physical units, 1e-6-size
   // values) a fixed 1e-5 dwarfs every luminance, Y' = log(Y + e) then barely moves, and its half
-  // floats' steps became 8-27 % errors (a 4 x 4 synth times 1e-6: relative L2 0.27 against 9e-4
+  // floats' steps became 13-27 % errors (a 4 x 4 synth times 1e-6: relative L2 0.27 against 9e-4
   // at scale 1). The smallest normal float keeps e a normal float for data near underflow.
   const double e = sum_y > 0 ? sum_y2 / sum_y : 0;
   return std::isfinite(e) && e > 0 ? std::max(e, double(std::numeric_limits<float>::min())) : k_drr_eps;
