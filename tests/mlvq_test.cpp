@@ -2,6 +2,7 @@
 // model, SSIM-threshold monotonicity, extremes (constant, all-zero, HDR 1e-6..1e6), storage and
 // hostile files, and the OpenCL kernels against their C++ references.
 #include <gtest/gtest.h>
+#include <omp.h>
 #include <unistd.h>
 
 #include <cmath>
@@ -471,6 +472,32 @@ TEST(MlvqSearch, ScanGivesTheFormulasBitsForEveryPair) {
       }
     }
   }
+}
+
+// The search scans the codebook in blocks of candidates and chunks of 1024 entries (codebook.cpp,
+// search_entries): the model may not depend on how many threads ran the blocks, and a noisy BTF
+// grows codebooks past one chunk.
+TEST(MlvqSearch, ModelDoesNotDependOnTheThreadCount) {
+  SynthOptions o;
+  o.width = 12, o.height = 12, o.seed = 5, o.noise = 0.1f, o.scale = 300;
+  auto b = synthesize_btf(o);
+  ASSERT_TRUE(b.ok()) << b.status().message();
+  const int threads = omp_get_max_threads();
+  std::vector<float> first;
+  double most = 0;
+  for (int t : {1, 2, 3}) {
+    omp_set_num_threads(t);
+    auto m = encode(*b, "mlvq");
+    omp_set_num_threads(threads);
+    ASSERT_TRUE(m);
+    for (const char* part : {"lum", "chroma"})
+      for (int k = 1; k <= 4; ++k) most = std::max(most, stat(*m, std::string("entries.") + part + std::to_string(k)));
+    const Btf out = decode_all(*m);
+    const std::vector<float> v(out.data(), out.data() + out.size());
+    if (first.empty()) first = v;
+    else EXPECT_TRUE(v == first) << t << " threads";
+  }
+  EXPECT_GT(most, 1024);  // two chunks of entries or more
 }
 
 // ---- OpenCL kernels vs C++ references --------------------------------------------------------

@@ -114,6 +114,58 @@ void product_rows(Eigen::Map<MatrixXfR> Z, const MatrixXfR& X, const float* E, s
   }
 }
 
+// The scan of a batch's candidates (rows of Xl / Xc) against the K0 entries made before it
+// (prototypes El / Ec, K0 x dl and K0 x dc row-major): best[i] = the first entry of the largest
+// margin (ssim_margins), best_sim[i] its margin, best_scale[i] its scale.
+//
+// Why blocks: the dot products come from GEMMs of a block of candidates with a chunk of 1024
+// entries, scanned while they are in L2, entries in order (a later entry wins only with a larger
+// margin, the scan's rule). The whole batch's product (up to 16 M floats, 64 MB) went to memory
+// and back three times (Eigen zeroes a product before the BLAS call adds into it, the GEMM writes
+// it, the scan reads it), which on the low levels' short vectors (9-18 values) cost more than the
+// arithmetic: memset and its page faults were 16 % of an encode of a noisy BTF (perf). The blocks'
+// GEMMs round some dot products differently from the batch's one GEMM (OpenBLAS picks its paths by
+// shape), so a choice within float rounding of the threshold can differ from the unblocked
+// search's; the blocks' shapes depend on the batch alone, never on the thread count.
+template <class ScanOf>
+void search_entries(const MatrixXfR& Xl, const MatrixXfR& Xc, const std::vector<float>& El, const std::vector<float>& Ec, size_t K0,
+                    const EntryTerms& terms, const std::vector<double>& xm, const ScanOf& scan_candidate, std::vector<int>& best,
+                    std::vector<double>& best_sim, std::vector<double>& best_scale) {
+  const size_t B = size_t(std::max(Xl.rows(), Xc.rows()));
+  const Eigen::Index dl = Xl.cols(), dc = Xc.cols();
+  // Blocks of 16-128 candidates, at least 4 per batch (the batch shrinks as the codebook grows).
+  const size_t RB = std::clamp<size_t>(B / 4 / 16 * 16, 16, 128);
+  constexpr size_t KC = 1024;  // a block's products: at most 128 x 1024 floats (512 kB) per part
+#pragma omp parallel
+  {
+    std::vector<float> gl(dl ? RB * KC : 0), gc(dc ? RB * KC : 0);
+    std::vector<double> margin(KC), scale(KC);
+#pragma omp for schedule(dynamic, 1)
+    for (size_t r0 = 0; r0 < B; r0 += RB) {
+      const size_t rows = std::min(RB, B - r0);
+      for (size_t i = r0; i < r0 + rows; ++i) best[i] = -1, best_sim[i] = -3, best_scale[i] = 1;
+      for (size_t j0 = 0; j0 < K0; j0 += KC) {
+        const size_t k = std::min(KC, K0 - j0);
+        Eigen::Map<MatrixXfR> Gl(gl.data(), Eigen::Index(rows), dl ? Eigen::Index(k) : 0);
+        Eigen::Map<MatrixXfR> Gc(gc.data(), Eigen::Index(rows), dc ? Eigen::Index(k) : 0);
+        if (dl)
+          Gl.noalias() = Xl.middleRows(Eigen::Index(r0), Eigen::Index(rows)) *
+                         Eigen::Map<const MatrixXfR>(El.data() + j0 * size_t(dl), Eigen::Index(k), dl).transpose();
+        if (dc)
+          Gc.noalias() = Xc.middleRows(Eigen::Index(r0), Eigen::Index(rows)) *
+                         Eigen::Map<const MatrixXfR>(Ec.data() + j0 * size_t(dc), Eigen::Index(k), dc).transpose();
+        for (size_t i = 0; i < rows; ++i) {
+          const size_t c = r0 + i;
+          ssim_margins(scan_candidate(&xm[5 * c]), terms, j0, k, dl ? &Gl(Eigen::Index(i), 0) : nullptr,
+                       dc ? &Gc(Eigen::Index(i), 0) : nullptr, margin.data(), scale.data());
+          for (size_t j = 0; j < k; ++j)
+            if (margin[j] > best_sim[c]) best_sim[c] = margin[j], best[c] = int(j0 + j), best_scale[c] = scale[j];
+        }
+      }
+    }
+  }
+}
+
 // One leader pass of part `part` at `level` over `cand` (see the file comment).
 // Similarity of a candidate to an entry is its margin over the thresholds: min(lum SSIM - thr_l,
 // chroma SSIM - thr_c) over the parts present; an entry is reused when the best margin is >= 0.
@@ -130,7 +182,7 @@ PassOut leader_pass(const Btf& btf, const ResamplePlan& plan, int level, Part pa
   EntryTerms terms;                    // the same entries' terms for the CPU scan (ssim_scan.cpp)
   size_t K = 0;
   MatrixXfR Xl, Xc;
-  Scratch gl_buf, gc_buf, hl_buf, hc_buf;  // the batches' products (Gl, Gc, Hl, Hc below)
+  Scratch hl_buf, hc_buf;              // the batches' Gram matrices (Hl, Hc below)
   std::vector<double> xm;              // per candidate: sx, sxx, L, sxc, sxxc
   std::vector<int> best;
   std::vector<double> best_sim, best_scale;
@@ -180,31 +232,7 @@ PassOut leader_pass(const Btf& btf, const ResamplePlan& plan, int level, Part pa
         cl_search = false;  // the device failed: CPU for the rest of the pass (warned by the runtime)
       }
     }
-    if (K0 > 0 && !cl_search) {
-      Eigen::Map<MatrixXfR> Gl = gl_buf.view(B, dl ? K0 : 0), Gc = gc_buf.view(B, dc ? K0 : 0);
-      if (dl) product_rows(Gl, Xl, El.data(), K0);
-      if (dc) product_rows(Gc, Xc, Ec.data(), K0);
-#pragma omp parallel
-      {
-        // Margins of a run of entries at a time (in L1), then the first best of the run.
-        constexpr size_t R = 512;
-        double margin[R], scale[R];
-#pragma omp for schedule(dynamic, 16)
-        for (size_t i = 0; i < B; ++i) {
-          const ScanCandidate x = scan_candidate(&xm[5 * i]);
-          double bs = -3, bsc = 1;
-          int bj = -1;
-          for (size_t j0 = 0; j0 < K0; j0 += R) {
-            const size_t k = std::min(R, K0 - j0);
-            ssim_margins(x, terms, j0, k, dl ? &Gl(Eigen::Index(i), Eigen::Index(j0)) : nullptr,
-                         dc ? &Gc(Eigen::Index(i), Eigen::Index(j0)) : nullptr, margin, scale);
-            for (size_t j = 0; j < k; ++j)
-              if (margin[j] > bs) bs = margin[j], bj = int(j0 + j), bsc = scale[j];
-          }
-          best[i] = bj, best_sim[i] = bs, best_scale[i] = bsc;
-        }
-      }
-    }
+    if (K0 > 0 && !cl_search) search_entries(Xl, Xc, El, Ec, K0, terms, xm, scan_candidate, best, best_sim, best_scale);
     // In order: zero vectors, matches, matches among this batch's new entries, new entries.
     // The dot products with this batch's new entries (prototypes are batch rows) come from the
     // batch's Gram matrices, one GEMM each: the sequential part is then O(B x new entries)
