@@ -14,7 +14,13 @@ void quant_steps(const MatrixXfR& U, const MatrixXfR& SxV, int bits, std::vector
   std::vector<double> sigma(static_cast<size_t>(C), 0.0);
   double s1 = 0;
   for (Eigen::Index k = 0; k < C; ++k) s1 = std::max(s1, sigma[size_t(k)] = SxV.col(k).cast<double>().norm());
-  double D = std::ldexp(s1 / std::sqrt(texels), -bits);
+  // The header's D, from the strongest eigen-texture's RMS, unless the eigen-ABRDFs have more
+  // than 16 times as many values (a few texels under many directions: one texel, a small crop):
+  // equal error per value gives U rows / texels times SxV's share of the error, and at one texel
+  // of 151 x 151 directions D from the texel alone erred 33 % (rank 1, bits=8). The level then
+  // follows the eigen-ABRDFs' RMS: U's share stays within 16 x SxV's.
+  const double rows = std::max<double>(1, double(U.rows()));
+  double D = std::ldexp(s1 / std::sqrt(std::max(texels, rows / 16)), -bits);
   if (!(D > 0) || !std::isfinite(D)) D = 1;  // all-zero factors: any step codes them exactly
   u_steps.resize(size_t(C)), sxv_steps.resize(size_t(C));
   auto floor_step = [](double step, double max_abs) {  // integers stay within +-2^29

@@ -9,9 +9,10 @@
 //     e_k = D for every eigen-texture,   d_k = D / sigma_k for the eigen-ABRDFs,
 // and components whose entries are smaller than D round (mostly) to zero and cost almost no
 // bits: the "water level" D decides which components are worth bits. One knob sets D:
-//     D = 2^-bits * sigma_1 / sqrt(texels)   (the RMS of the strongest eigen-texture),
+//     D = 2^-bits * sigma_1 / sqrt(max(texels, rows / 16))   (the RMS of the strongest eigen-texture),
 // so `bits` is about the bit depth of the strongest eigen-texture, and every setting adapts to
-// the data's scale. A step is never below max|column| / 2^29 (integers stay in range).
+// the data's scale. (rows / 16: with many more rows than texels, a few texels under many
+// directions, U's error, rows / texels times SxV's, would otherwise swamp the model.) A step is never below max|column| / 2^29 (integers stay in range).
 //
 // textures=dct: each SxV column (an image of width x height texels) is coded as its orthonormal
 // 8 x 8 DCT (the BSVTF tile transform, core/dct.h) with the same step D: the transform is
