@@ -587,6 +587,18 @@ TEST(Lpca, ExtremesZeroConstantOneTexelAndHdr) {
   }
 }
 
+// precision=q on one texel under 81 x 81 directions: the step follows the ABRDF's RMS per
+// abrdf / 16 values, not the one texel's (as fmf's, codecs/fmf/fmf_quant.h), else the mean's
+// rounding alone erred 21-33 % at bits=8.
+TEST(Lpca, QuantizedOneTexelUnderManyDirectionsKeepsItsBits) {
+  const Btf b = synth(1, 1, DirectionSet::ubo2003());
+  auto m = encode(b, "lpca:precision=q:bits=8");
+  ASSERT_TRUE(m);
+  const double e = compare_btf(b, decode(*m), false).value().rel_l2;
+  EXPECT_GE(e, 0.75 * 0.006);
+  EXPECT_LE(e, 0.006);
+}
+
 TEST(Lpca, QualityOnSyntheticIsWithinTwoSidedBounds) {
   Btf b = synth(16, 16, some_views({0, 7, 30}));
   auto m = encode(b, "lpca:clusters=4:components=4");

@@ -493,6 +493,18 @@ TEST(Lpyr, EvalDirAtMeasuredDirectionsEqualsEval) {
   for (int k = 0; k < 3; ++k) EXPECT_NEAR(a[k], c[k], 1e-6);
 }
 
+// precision=q on one texel under 81 x 81 directions: the step follows the ABRDF's RMS per
+// abrdf / 16 values, not the one texel's (as fmf's, codecs/fmf/fmf_quant.h), else the mean's
+// rounding alone erred 21-33 % at bits=8.
+TEST(Lpyr, QuantizedOneTexelUnderManyDirectionsKeepsItsBits) {
+  const Btf b = synth(1, 1, 81, false);
+  auto m = encode(b, "lpyr:precision=q:bits=8");
+  ASSERT_TRUE(m);
+  const double e = compare_btf(b, decode(*m), false).value().rel_l2;
+  EXPECT_GE(e, 0.75 * 0.01);
+  EXPECT_LE(e, 0.01);
+}
+
 TEST(Lpyr, QualityBoundsOnSyntheticBtf) {
   // Two-sided bounds (0.75 bound <= error <= bound) so they cannot silently loosen.
   const Btf b = synth(32, 32);

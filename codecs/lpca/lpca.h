@@ -35,7 +35,9 @@
 // Hence weight step D, eigen-BRDF step D / sigma_ki (at most 4: a component without energy
 // rounds to zero), mean step D / sqrt(n_k), with D = 2^-bits x the RMS over texels of the
 // ABRDF norm ||B_x|| (so `bits` is about the bit depth of the strongest weight, as fmf's bits;
-// every setting follows the data's scale). The table is quantized first and the weights are
+// every setting follows the data's scale). With fewer texels than abrdf_size / 16 (a few texels
+// under many directions) the RMS is taken over abrdf_size / 16 "texels", as fmf's D: the table's
+// share of the error would otherwise be abrdf_size / texels times the weights'. The table is quantized first and the weights are
 // projected onto the dequantized table, so they absorb its rounding. The model holds the
 // dequantized values: in memory it equals the file bit for bit, and exports read floats.
 // The SH coefficients are derived from the table at load (cheap: K(c+1) x views x lights x n^2),

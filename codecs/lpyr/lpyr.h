@@ -76,7 +76,8 @@
 // rounded with step e adds e^2 / 12 x n_0 / N_k x g_ch; an entry of E_j with step s adds
 // s^2 / 12 x ||D_j||^2 n_0 / N_k g_ch; a mean entry with step m adds m^2 / 12 x n_0 g_ch. With
 // R = 2^-bits x the RMS over texels of the RGB ABRDF norm (`bits` about the bit depth of the
-// strongest weight, as fmf's bits):
+// strongest weight, as fmf's bits; over lights x views / 16 "texels" when there are fewer, as
+// fmf's D, else a few texels' means would take most of the error):
 //   D step  e = R / sqrt(g_ch n_0 / N_k),  E_j step e / ||D_j|| (at most 4),  mean step R / sqrt(g_ch n_0).
 // Means are quantized before their level's PCA (which absorbs their rounding); Phong stays f32.
 // The model holds the dequantized values (in memory = file), so exports read floats.
