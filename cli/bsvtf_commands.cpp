@@ -14,6 +14,7 @@
 
 #include "cli/commands.h"
 #include "cli/outputs.h"
+#include "core/params.h"
 #include "formats/bsvtf/bsvtf.h"
 #include "formats/bsvtf/tile_cache.h"
 #include "formats/btf_io.h"
@@ -50,6 +51,8 @@ int cmd_bsvtf(const Global& g, const BsvtfArgs& a) {
   if (Status c = claim_output(a.out, {a.in}, {"-o", {".bsvtf"}}); !c.ok()) return fail(g, c);
   auto model = open_model(a.in);
   if (!model.ok()) return fail(g, model.status());
+  if (auto spec = parse_spec_string((*model)->spec()); spec.ok() && spec->codec != "fmf")
+    return fail(g, unsupported(a.in + ": codec " + spec->codec + "; BSVTF streams fmf models only (encode with -c fmf)"));
   BsvtfOptions o;
   o.quality = a.quality, o.tile = a.tile;
   BsvtfReport r;
@@ -72,6 +75,7 @@ int cmd_bsvtf(const Global& g, const BsvtfArgs& a) {
               << "\n";
     return 0;
   }
+  if (g.quiet) return 0;
   std::printf("%s: %zu tiles in %d levels (%zu virtual textures of 4 eigen-textures), %s\n", a.out.c_str(), r.tiles, r.levels, r.textures,
               human(r.file_bytes).c_str());
   std::printf("  tiles %s: %.2f:1 vs the tiles as half floats (%s, borders included)\n", human(r.tile_bytes).c_str(), ratio_tiles,

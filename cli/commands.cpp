@@ -485,6 +485,11 @@ int cmd_convert(const Global& g, const ConvertArgs& a) {
   if (!model.ok()) return fail(g, model.status());
   Status s;
   if (ends_with(a.out, ".btf")) {
+    // Bonn's format holds factorizations only: say so with the file's name, not the writer's
+    // "not an fmf model" after the model's spec.
+    auto spec = parse_spec_string(model.value()->spec());
+    if (spec.ok() && spec->codec != "fmf")
+      return fail(g, unsupported(a.in + ": codec " + spec->codec + "; a Bonn .btf holds fmf models only (FMF, DFMF): keep it as .btfc"));
     s = write_bonn(*model.value(), a.out, a.precision == "half");
   } else if (ends_with(a.out, ".btfc")) {
     auto spec = parse_spec_string(model.value()->spec());

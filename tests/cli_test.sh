@@ -134,6 +134,14 @@ check tilecache 0 "$BTFC" tilecache "$W/m.bsvtf" --frames 3 --cache-tiles 3,100 
 expect_grep tilecache-csv "^100,2," "$W/tc.csv"
 check bsvtf-raw-input 1 "$BTFC" bsvtf "$W/s.btfc" -o "$W/bad.bsvtf"
 [ ! -e "$W/bad.bsvtf" ] && echo "ok   bsvtf-no-output" || { echo "FAIL bsvtf-no-output"; fails=$((fails + 1)); }
+# Models of other codecs: refused by the file's name and codec, nothing written.
+check bsvtf-lpyr 2 "$BTFC" bsvtf "$W/l.btfc" -o "$W/bad.bsvtf"
+expect_grep bsvtf-lpyr-msg "l.btfc: codec lpyr; BSVTF streams fmf models only" "$W/err.txt"
+check convert-lpyr-bonn 2 "$BTFC" convert "$W/l.btfc" -o "$W/bad.btf"
+expect_grep convert-lpyr-msg "l.btfc: codec lpyr; a Bonn .btf holds fmf models only" "$W/err.txt"
+[ ! -e "$W/bad.bsvtf" ] && [ ! -e "$W/bad.btf" ] && echo "ok   other-codecs-no-output" || { echo "FAIL other-codecs-no-output"; fails=$((fails + 1)); }
+check bsvtf-quiet 0 "$BTFC" -q bsvtf "$W/m.btfc" -o "$W/q.bsvtf" --tile 8
+[ ! -s "$W/out.txt" ] && echo "ok   bsvtf-quiet-silent" || { echo "FAIL bsvtf-quiet-silent"; cat "$W/out.txt"; fails=$((fails + 1)); }
 check tilecache-not-bsvtf 2 "$BTFC" tilecache "$W/m.btfc"
 expect_grep tilecache-not-bsvtf-msg "wrong magic" "$W/err.txt"
 # render
