@@ -308,13 +308,15 @@ int cmd_compress(const Global& g, const CompressArgs& given) {
     TargetChoice& c = choice.value();
     target_json = {{"knob", c.knob}, {"value", c.knob_value}, {"reached", num(c.measure)}, {"probes", json::array()}};
     if (c.knob_limit > 0) target_json["knob_limit"] = c.knob_limit;
+    if (!c.variants.empty()) target_json["variants"] = c.variants;
     for (const TargetProbe& p : c.probes)
       target_json["probes"].push_back({{"knob", p.knob}, {"measure", num(p.measure)}, {"meets", p.meets}});
     if (!g.json && !g.quiet) {
       std::cout << "target: chose " << c.knob << " = " << c.knob_value << " (reached " << c.measure << "); probes:";
       for (const TargetProbe& p : c.probes) std::cout << " " << p.knob << (p.meets ? "+" : "-") << "(" << p.measure << ")";
       std::cout << "\n";
-      if (!c.variants.empty()) std::cout << "target: best fit per setting:" << c.variants << "\n";
+      if (!c.variants.empty())
+        std::cout << (t.kind == Target::Kind::max_bytes ? "target: best fit per setting:" : "target:") << c.variants << "\n";
       if (c.knob_limit > 0)
         std::cout << "target: " << c.knob << " limited to " << c.knob_limit << " for this data's size (the codec's budget limit)\n";
     }

@@ -133,6 +133,11 @@ class Codec {
   // knob alone. Listed from the most to the least accurate at equal knob (half, then q at falling
   // bit depths): once one fits at budget_knob_limit, the later ones cannot beat it and are skipped.
   virtual std::vector<std::string> budget_variants() const { return {}; }
+  // Settings a quality search (--target-psnr / --target-ssim) escalates to, in order, when the
+  // knob alone cannot reach the target: spec fragments laid over the spec as budget_variants'
+  // (keys the user's spec sets are kept). Empty: the knob alone. For codecs whose quality has
+  // more than one limit (mlvq: the knob is one level's threshold of four, the noise cap, the bits).
+  virtual std::vector<std::string> quality_variants() const { return {}; }
   // Why --max-bytes cannot search this codec (nullptr: it can): choose_for_target refuses a byte
   // budget with this reason, naming what to use instead, rather than run a search for an hour.
   virtual const char* no_budget_search() const { return nullptr; }

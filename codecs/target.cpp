@@ -216,8 +216,26 @@ Result<TargetChoice> choose_for_target(const Btf& btf, const std::string& spec, 
   const ExactSvdReuse reuse;
   if (const char* why = resolved.first->no_budget_search(); why && target.kind == Target::Kind::max_bytes)
     return unsupported(std::string(resolved.first->name()) + ": --max-bytes is not supported: " + why);
+  if (target.kind != Target::Kind::max_bytes) {
+    // A quality target: the knob, then each escalation setting until one reaches it; the error of
+    // the last one tried (its best probe is the highest quality the codec was asked for).
+    auto c = search_knob(btf, spec, target, ctx);
+    if (c.ok()) return c;
+    BTFC_ASSIGN_OR_RETURN(SpecString base, parse_spec_string(spec));
+    for (const std::string& v : resolved.first->quality_variants()) {
+      const std::string s = apply_variant(base, v);
+      if (s.empty() || s == spec) continue;
+      auto e = search_knob(btf, s, target, ctx);
+      if (e.ok()) {
+        e->variants = " the knob alone missed it; reached with " + v;
+        return e;
+      }
+      c = std::move(e);
+    }
+    return c;
+  }
   const std::vector<std::string> variants = resolved.first->budget_variants();
-  if (target.kind != Target::Kind::max_bytes || variants.empty()) return search_knob(btf, spec, target, ctx);
+  if (variants.empty()) return search_knob(btf, spec, target, ctx);
   // A byte budget over the codec's settings: the knob per setting, then the best PSNR.
   BTFC_ASSIGN_OR_RETURN(SpecString base, parse_spec_string(spec));
   std::vector<std::string> specs;

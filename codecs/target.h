@@ -43,7 +43,8 @@ struct TargetChoice {
   std::vector<TargetProbe> probes;  // in the order tried
   std::unique_ptr<Model> model;
   // A byte budget over Codec::budget_variants(): the chosen model's PSNR, and every setting's
-  // best fit with its PSNR ("spec: 41.2 dB; ...").
+  // best fit with its PSNR ("spec: 41.2 dB; ..."). A quality target reached through
+  // Codec::quality_variants(): which setting reached it (" the knob alone missed it; ...").
   double psnr = 0;
   std::string variants;
   // A byte budget: the largest knob the search could probe (Codec::budget_knob_limit, or the

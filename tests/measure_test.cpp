@@ -208,6 +208,26 @@ TEST(Target, CodecsThatCannotBeSearchedSaySoForAByteBudget) {
   EXPECT_NE(c.status().message().find("min_ratio"), std::string::npos) << c.status().message();
 }
 
+// mlvq's knob (ssim1) is one level's threshold of four: a PSNR above what it reaches with the
+// other levels at their defaults is searched again through the codec's quality_variants.
+TEST(Target, QualityTargetsEscalateThroughTheCodecsSettings) {
+  const Btf b = small_btf(6, 6);
+  Context ctx;
+  const Target t{Target::Kind::psnr, 35};
+  // noise fixed by the spec: the escalation settings (noise=off) do not apply, the knob alone misses.
+  auto knob_only = choose_for_target(b, "mlvq:noise=auto", t, ctx);
+  ASSERT_FALSE(knob_only.ok());
+  EXPECT_NE(knob_only.status().message().find("out of reach"), std::string::npos) << knob_only.status().message();
+  auto c = choose_for_target(b, "mlvq", t, ctx);
+  ASSERT_TRUE(c.ok()) << c.status().message();
+  EXPECT_GE(c->measure, 35);
+  EXPECT_NE(c->variants.find("reached with ssim2=0.99"), std::string::npos) << c->variants;
+  EXPECT_EQ(c->spec, c->model->spec());
+  Btf out;
+  ASSERT_TRUE(c->model->decode_all(out).ok());
+  EXPECT_GE(compare_btf(b, out, false)->psnr, 35);
+}
+
 TEST(Target, UnreachableTargetsAreErrors) {
   const Btf b = small_btf(6, 6);
   Context ctx;
