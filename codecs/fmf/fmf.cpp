@@ -30,7 +30,7 @@ const ParamSpec k_params[] = {
      "out of core: block Krylov on the rows side, at most q + 2 reads of the data, stops when converged)"},
     {"precision", ParamSpec::Type::choice, "half", 0, 0, {"half", "float", "q"},
      "storage of U and SxV: half / float, or q = per-component quantized integers, zstd-coded (fmf_quant.h)"},
-    {"bits", ParamSpec::Type::integer, "8", 2, 20, {}, "precision=q: step = 2^-bits x RMS of the strongest eigen-texture (SxV column), U column k's step / sigma_k (equal error per component)"},
+    {"bits", ParamSpec::Type::integer, "8", 2, 20, {}, "precision=q: step = 2^-bits x RMS of the strongest eigen-texture (SxV column; per at least rows / 16 texels), U column k's step / sigma_k (equal error per component)"},
     {"textures", ParamSpec::Type::choice, "plain", 0, 0, {"plain", "dct"}, "precision=q: SxV columns coded as integers (plain) or as 8x8 DCT coefficients of the eigen-texture images (dct)"},
     {"offset", ParamSpec::Type::real, "0", 0, 1e30, {}, "color=dfmf: luminance offset e of Y' = log(Y + e), U' = U / (Y + e); 0 = from the data (sum Y^2 / sum Y); 1e-5 = Bonn's colour model 11 exactly"},
 };

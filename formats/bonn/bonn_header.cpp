@@ -166,7 +166,7 @@ Status ByteSink::scalars(const float* p, size_t n, bool half, const std::string&
       const float v = p[i + j];
       if (!(std::fabs(v) <= 65504.0f))
         return invalid_argument(m_path + ": " + field + " value " + std::to_string(v) +
-                                " is outside the half range (write with float precision)");
+                                " is outside the half range (65504): write float scalars (btfc convert MODEL.btfc -o OUT.btf --precision float)");
       buf[j] = Imath::half(v).bits();
     }
     bytes(buf.data(), k * 2);
