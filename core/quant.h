@@ -23,6 +23,7 @@
 //  - quantize_column is round-to-nearest (ties away from zero); decode(encode(x)) reproduces the
 //    dequantized values bit for bit (the in-memory model of a codec equals its file).
 #pragma once
+#include <algorithm>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -31,6 +32,14 @@
 #include "core/status.h"
 
 namespace btfc::quant {
+
+// How many texels a codec's step rule ("2^-bits x the signal's RMS per texel", equal error per
+// stored value: fmf_quant.h, lpca.h, lpyr.h) divides the energy by: the texels, or abrdf / 16
+// when a texel's ABRDF has over 16 times as many values (a few texels under many directions).
+// With the texels alone the direction-side factors, abrdf / texels times as many values, take
+// that many times the texel side's error: one texel of 151 x 151 directions erred 21-33 % at
+// bits 8 in fmf, lpca and lpyr (docs/benchmarks.md, "Bits where they matter").
+inline double step_texels(double texels, double abrdf_values) { return std::max({1.0, texels, abrdf_values / 16}); }
 
 struct Layout {
   bool dct = false;  // columns are images coded as 8x8 DCT coefficients

@@ -10,17 +10,12 @@ namespace btfc::fmf {
 
 void quant_steps(const MatrixXfR& U, const MatrixXfR& SxV, int bits, std::vector<float>& u_steps, std::vector<float>& sxv_steps) {
   const Eigen::Index C = SxV.cols();
-  const double texels = std::max<double>(1, double(SxV.rows()));
+  // The header's D: the strongest eigen-texture's RMS, over at least U's rows / 16 texels.
+  const double texels = quant::step_texels(double(SxV.rows()), double(U.rows()));
   std::vector<double> sigma(static_cast<size_t>(C), 0.0);
   double s1 = 0;
   for (Eigen::Index k = 0; k < C; ++k) s1 = std::max(s1, sigma[size_t(k)] = SxV.col(k).cast<double>().norm());
-  // The header's D, from the strongest eigen-texture's RMS, unless the eigen-ABRDFs have more
-  // than 16 times as many values (a few texels under many directions: one texel, a small crop):
-  // equal error per value gives U rows / texels times SxV's share of the error, and at one texel
-  // of 151 x 151 directions D from the texel alone erred 33 % (rank 1, bits=8). The level then
-  // follows the eigen-ABRDFs' RMS: U's share stays within 16 x SxV's.
-  const double rows = std::max<double>(1, double(U.rows()));
-  double D = std::ldexp(s1 / std::sqrt(std::max(texels, rows / 16)), -bits);
+  double D = std::ldexp(s1 / std::sqrt(texels), -bits);
   if (!(D > 0) || !std::isfinite(D)) D = 1;  // all-zero factors: any step codes them exactly
   u_steps.resize(size_t(C)), sxv_steps.resize(size_t(C));
   auto floor_step = [](double step, double max_abs) {  // integers stay within +-2^29

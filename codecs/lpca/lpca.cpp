@@ -363,12 +363,7 @@ class LpcaCodec final : public Codec {
     std::vector<Tensor> coded;
     double q_step = 0;  // the weight step D
     if (cfg.bits > 0) {
-      // RMS per texel, or per rows / 16 texels when the table's columns are over 16 times longer
-      // than the texels (a few texels under many directions): as fmf's D (fmf_quant.h), else
-      // the means' and eigen-BRDFs' share of the error (rows / texels times the weights') swamps
-      // the model (one texel of 151 x 151 directions: 33 % at bits=8).
-      const double texels_eff = std::max(double(std::max<Index>(1, N)), double(dim) / 16);
-      q_step = std::ldexp(std::sqrt(std::max(0.0, fit.total_energy) / texels_eff), -cfg.bits);
+      q_step = std::ldexp(std::sqrt(std::max(0.0, fit.total_energy) / quant::step_texels(double(N), double(dim))), -cfg.bits);
       if (!(q_step > 0) || !std::isfinite(q_step)) q_step = 1;  // all-zero data: any step is exact
       const Index R = Index(K) * (c + 1);
       std::vector<double> members(size_t(K), 0.0), sigma2(size_t(R), 0.0);

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 
+#include "core/quant.h"
 #include "core/svd.h"
 #include "codecs/lpyr/lpyr_cl.h"
 #include "codecs/lpyr/lpyr_internal.h"
@@ -136,12 +137,9 @@ struct Encoder {
       double e = 0;
 #pragma omp parallel for reduction(+ : e) schedule(static)
       for (size_t i = 0; i < d.num_values(); ++i) e += double(btf.data()[i]) * btf.data()[i];
-      // Per rows / 16 texels when a channel's ABRDF is over 16 times longer than the texels (a few
-      // texels under many directions), as fmf's D (fmf_quant.h): else the means' share of the
-      // error, rows / texels times the weights', swamps the model (one texel of 151 x 151
-      // directions: 21 % at bits=8).
-      const double texels_eff = std::max(double(std::max<size_t>(1, n0)), double(d.num_lights() * d.num_views()) / 16);
-      q_ref = std::ldexp(std::sqrt(e / texels_eff), -int(p.get_int("bits")));
+      // Per texel of a channel's ABRDF (lights x views values; quant::step_texels).
+      q_ref = std::ldexp(std::sqrt(e / quant::step_texels(double(n0), double(d.num_lights() * d.num_views()))),
+                         -int(p.get_int("bits")));
       if (!(q_ref > 0) || !std::isfinite(q_ref)) q_ref = 1;  // all-zero data: any step is exact
       for (int c = 0; c < 3; ++c) {  // squared RGB change per unit change of channel c
         float unit[3] = {0, 0, 0}, rgb[3];
