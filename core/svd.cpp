@@ -586,9 +586,10 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
     if (blocks == max_blocks) break;
     // Error-driven stop: the rank-C error of the current basis, from the eigenvalues of W W^T
     // (in double: the residual is a small difference of large sums).
-    Eigen::SelfAdjointEigenSolver<MatrixXd> es(G.topLeftCorner(w, w), Eigen::EigenvaluesOnly);
+    Eigen::VectorXd ev;
+    symmetric_eigen(G.topLeftCorner(w, w), ev, nullptr);
     const Index c = std::min<Index>(opt.max_rank, w);
-    const double kept = es.eigenvalues().tail(c).cwiseMax(0.0).sum();
+    const double kept = ev.tail(c).cwiseMax(0.0).sum();
     const double err = r.total_energy > 0 ? std::sqrt(std::max(0.0, r.total_energy - kept) / r.total_energy) : 0;
     if (blocks >= 2 && last_err - err <= k_krylov_stop * err) break;
     last_err = err;
@@ -646,26 +647,45 @@ int choose_rank(const Eigen::VectorXd& lambda, double total, const SvdOptions& o
 namespace {
 
 #ifdef BTFC_HAVE_OPENBLAS
-// All eigenpairs by dsyevd, ascending; false when LAPACK reports a failure (then Eigen's solver runs).
-bool lapack_eigen(const MatrixXd& G, Eigen::VectorXd& w, MatrixXd& A) {
+// All eigenvalues (and with `vectors`, eigenvectors) by dsyevd, ascending; false when LAPACK
+// reports a failure (then Eigen's solver runs).
+bool lapack_eigen(const MatrixXd& G, Eigen::VectorXd& w, MatrixXd& A, bool vectors = true) {
   if (G.rows() > INT_MAX / 4) return false;
   const int n = int(G.rows());
+  const char* jobz = vectors ? "V" : "N";
   A = G;  // column-major, overwritten by the eigenvectors
   w.resize(n);
   int info = 0, lwork = -1, liwork = -1, iwork_query = 0;
   double work_query = 0;
-  dsyevd_("V", "L", &n, A.data(), &n, w.data(), &work_query, &lwork, &iwork_query, &liwork, &info, 1, 1);
+  dsyevd_(jobz, "L", &n, A.data(), &n, w.data(), &work_query, &lwork, &iwork_query, &liwork, &info, 1, 1);
   if (info != 0) return false;
   lwork = int(work_query);
   liwork = iwork_query;
   std::vector<double> work(size_t(std::max(lwork, 1)));
   std::vector<int> iwork(size_t(std::max(liwork, 1)));
-  dsyevd_("V", "L", &n, A.data(), &n, w.data(), work.data(), &lwork, iwork.data(), &liwork, &info, 1, 1);
+  dsyevd_(jobz, "L", &n, A.data(), &n, w.data(), work.data(), &lwork, iwork.data(), &liwork, &info, 1, 1);
   return info == 0 && w.allFinite();
 }
 #endif
 
 }  // namespace
+
+void symmetric_eigen(const MatrixXd& G, Eigen::VectorXd& ascending, MatrixXd* vecs, Index lapack_from) {
+#ifdef BTFC_HAVE_OPENBLAS
+  if (G.rows() >= lapack_from) {
+    MatrixXd A;
+    if (lapack_eigen(G, ascending, A, vecs != nullptr)) {
+      if (vecs) *vecs = std::move(A);
+      return;
+    }
+  }
+#else
+  (void)lapack_from;
+#endif
+  Eigen::SelfAdjointEigenSolver<MatrixXd> es(G, vecs ? Eigen::ComputeEigenvectors : Eigen::EigenvaluesOnly);
+  ascending = es.eigenvalues();
+  if (vecs) *vecs = es.eigenvectors();
+}
 
 void top_eigenpairs(const MatrixXd& G, Index l, Eigen::VectorXd& lambda, MatrixXd& vecs, Index lapack_from) {
   const Index k = G.rows();

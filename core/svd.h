@@ -95,6 +95,13 @@ constexpr Eigen::Index k_lapack_eigen_from = 1025;
 constexpr Eigen::Index k_exact_lapack_eigen_from = 128;
 void top_eigenpairs(const Eigen::MatrixXd& G, Eigen::Index l, Eigen::VectorXd& lambda, Eigen::MatrixXd& vecs,
                     Eigen::Index lapack_from = k_lapack_eigen_from);
+// The eigenvalues (and with `vecs`, the eigenvectors) of a symmetric matrix, ascending as
+// Eigen's solver gives them, by the same rule: Eigen's solver below `lapack_from` rows (the bits
+// the Krylov iterations' stopping tests and restarts have always had), LAPACK's dsyevd from there
+// on. Why: the error-driven stop of a rank-1024 randomized SVD solves a 2080-5200 row Gram matrix
+// per block, and Eigen's unblocked solver took minutes of it (docs/benchmarks.md).
+void symmetric_eigen(const Eigen::MatrixXd& G, Eigen::VectorXd& ascending, Eigen::MatrixXd* vecs,
+                     Eigen::Index lapack_from = k_lapack_eigen_from);
 
 // How many columns (or rows) of length `len` the exact path converts to double at a time for
 // its Gram sums and projections: at most 4096 and at most 32 MiB of double. In core and streamed.

@@ -632,6 +632,37 @@ TEST(Svd, ExactThresholdTakesLapackForModerateGrams) {
   }
 }
 
+TEST(Svd, SymmetricEigenGivesEigensSolverAscendingOnEitherSide) {
+  // symmetric_eigen, the Krylov iterations' stopping tests and restarts: below its threshold
+  // Eigen's own solver (the same bits), from it on LAPACK (values, and vectors when asked),
+  // ascending as Eigen's. A 200 x 200 Gram matrix of rank 30 (170 eigenvalues at round-off).
+  const Eigen::Index k = 200;
+  const std::vector<float> b = test_matrix(size_t(k), 500, 30, 5);
+  Eigen::Map<const Eigen::MatrixXf> B(b.data(), k, 500);
+  const Eigen::MatrixXd G = B.cast<double>() * B.cast<double>().transpose();
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> ref(G);
+  Eigen::VectorXd below, values, with_vecs;
+  Eigen::MatrixXd vecs;
+  symmetric_eigen(G, below, nullptr, k + 1);
+  EXPECT_EQ(std::memcmp(below.data(), ref.eigenvalues().data(), sizeof(double) * size_t(k)), 0) << "Eigen's bits below the threshold";
+  symmetric_eigen(G, values, nullptr, k);
+  symmetric_eigen(G, with_vecs, &vecs, k);
+  ASSERT_EQ(values.size(), k);
+  ASSERT_EQ(vecs.rows(), k);
+  ASSERT_EQ(vecs.cols(), k);
+  const double top = ref.eigenvalues()(k - 1);
+  for (Eigen::Index i = 0; i < k; ++i) {
+    EXPECT_NEAR(values(i), ref.eigenvalues()(i), 1e-12 * top) << i;
+    EXPECT_NEAR(with_vecs(i), ref.eigenvalues()(i), 1e-12 * top) << i;
+    if (i > 0) {
+      EXPECT_LE(values(i - 1), values(i)) << "ascending";
+    }
+  }
+  // The 30 leading vectors: G v = lambda v to round-off (the rest span a numerically null space).
+  for (Eigen::Index i = k - 30; i < k; ++i)
+    EXPECT_LT((G * vecs.col(i) - with_vecs(i) * vecs.col(i)).norm(), 1e-10 * top) << i;
+}
+
 TEST(Svd, AutomaticPathIsExactForLargeRanksOfAModerateSide) {
   const size_t m = 1300, n = 1100;  // small side 1100: randomized at rank 32, exact from rank 122
   const std::vector<float> b = test_matrix(m, n, 60, 4);

@@ -137,8 +137,10 @@ class Krylov {
     // The in-core stop (svd.cpp): a block that gained at most k_krylov_stop of the error ends
     // the iteration. The next block, orth(Y), costs no pass and still joins the basis.
     const bool full = m_in_p == m_kept;
-    Eigen::SelfAdjointEigenSolver<MatrixXd> es(m_K.topLeftCorner(w, w), full ? Eigen::ComputeEigenvectors : Eigen::EigenvaluesOnly);
-    const double got = es.eigenvalues().tail(std::min<Index>(m_opt.max_rank, w)).cwiseMax(0.0).sum();
+    Eigen::VectorXd ev;
+    MatrixXd evecs;
+    symmetric_eigen(m_K.topLeftCorner(w, w), ev, full ? &evecs : nullptr);
+    const double got = ev.tail(std::min<Index>(m_opt.max_rank, w)).cwiseMax(0.0).sum();
     const double err = m_energy > 0 ? std::sqrt(std::max(0.0, m_energy - got) / m_energy) : 0;
     const bool stop = m_blocks >= 2 && m_last_err - err <= k_krylov_stop * err;
     m_last_err = err;
@@ -148,7 +150,7 @@ class Krylov {
       // dominant directions, which the later blocks are orthogonal to). Their Gram matrix is
       // diagonal.
       const Index r = m_width - m_l;
-      const MatrixXd E = es.eigenvectors().rightCols(r);
+      const MatrixXd E = evecs.rightCols(r);
       for (Index i = 0; i < Index(m_m); i += 1024) {
         const Index h = std::min<Index>(1024, Index(m_m) - i);
         const MatrixXd rows = m_P.middleRows(i, h) * E;
@@ -157,7 +159,7 @@ class Krylov {
       const MatrixXf Ef = E.cast<float>();
       for (MatrixXf& wt : m_wt)
         if (wt.size()) wt.leftCols(r) = (wt * Ef).eval();  // B^T (P E) = (B^T P) E
-      m_K.topLeftCorner(r, r) = es.eigenvalues().tail(r).asDiagonal();
+      m_K.topLeftCorner(r, r) = ev.tail(r).asDiagonal();
       --m_in_p;
     }
     const Index at = Index(m_in_p) * m_l;
