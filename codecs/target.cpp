@@ -1,6 +1,7 @@
 #include "codecs/target.h"
 
 #include <algorithm>
+#include <climits>
 #include <cmath>
 #include <cstdio>
 #include <map>
@@ -234,6 +235,9 @@ Result<TargetChoice> choose_for_target(const Btf& btf, const std::string& spec, 
     }
     return c;
   }
+  // A byte budget: where the knob counts components of a randomized SVD (fmf's rank), the probes
+  // take the leading components of a few larger factorizations (core/svd.h).
+  const RandomizedSvdReuse randomized(int(std::min<long long>(INT_MAX, resolved.first->budget_knob_limit(btf.desc()))));
   const std::vector<std::string> variants = resolved.first->budget_variants();
   if (variants.empty()) return search_knob(btf, spec, target, ctx);
   // A byte budget over the codec's settings: the knob per setting, then the best PSNR.

@@ -14,6 +14,7 @@
 #include <cstddef>
 #include <cstring>
 #include <list>
+#include <memory>
 #include <mutex>
 #include <optional>
 #include <random>
@@ -56,6 +57,20 @@ int g_reuse_scopes = 0;
 size_t g_reuses = 0;
 std::list<GramEigen> g_reuse;  // most recent first
 constexpr size_t k_reuse_entries = 3;  // dfmf factorizes three channel matrices per encode
+
+// RandomizedSvdReuse's store: one randomized factorization, the largest computed in the scope.
+struct KeptRandomized {
+  uint64_t fingerprint = 0;
+  Index m = 0, n = 0;
+  int oversample = 0, power_iters = 0, scheme = 0;
+  uint64_t seed = 0;
+  bool sparse = false;
+  int rank = 0;  // the max_rank it was computed for
+  SvdResult r;
+};
+int g_randomized_scopes = 0, g_randomized_rank = 0;
+size_t g_randomized_computed = 0, g_randomized_served = 0;
+std::unique_ptr<KeptRandomized> g_kept_randomized;
 
 // All eigenpairs, sorted by descending eigenvalue (the power scheme's small Rayleigh-Ritz step).
 void sorted_eigen(const MatrixXd& G, Eigen::VectorXd& lambda, MatrixXd& vecs) { top_eigenpairs(G, G.rows(), lambda, vecs); }
@@ -713,11 +728,85 @@ void top_eigenpairs(const MatrixXd& G, Index l, Eigen::VectorXd& lambda, MatrixX
   }
 }
 
+namespace {
+
+// r's leading `rank` components (all of them when it has fewer), as a rank-`rank` result.
+SvdResult leading(const SvdResult& r, int rank) {
+  SvdResult t;
+  const Index k = std::min<Index>(rank, r.S.size());
+  t.U = r.U.leftCols(k);
+  t.SxV = r.SxV.leftCols(k);
+  t.S = r.S.head(k);
+  t.total_energy = r.total_energy;
+  t.kept_energy = r.S.head(k).squaredNorm();
+  t.method = r.method;
+  t.requested_rank = rank;
+  t.data_rank_limit = r.data_rank_limit;
+  t.iterations = r.iterations;
+  t.sparse_start = r.sparse_start;
+  return t;
+}
+
+// RandomizedSvdReuse (svd.h): the kept factorization's leading components when it matches,
+// else a new one at the scope's rank for this request, kept when larger; null outside a scope.
+Result<std::optional<SvdResult>> reused_randomized(ConstMapF& B, const SvdOptions& opt) {
+  int scope_rank = 0;
+  {
+    std::lock_guard<std::mutex> lock(g_reuse_mutex);
+    scope_rank = g_randomized_scopes > 0 ? g_randomized_rank : 0;
+  }
+  if (!opt.truncation_ok || opt.target_rel_error > 0 || opt.max_rank > scope_rank) return std::optional<SvdResult>{};
+  const uint64_t fp = fingerprint(B);
+  auto same = [&](const KeptRandomized& k) {
+    return k.fingerprint == fp && k.m == B.rows() && k.n == B.cols() && k.oversample == opt.oversample && k.power_iters == opt.power_iters &&
+           k.scheme == int(opt.scheme) && k.seed == opt.seed && k.sparse == opt.sparse_sketch;
+  };
+  int kept_rank = 0;
+  {
+    std::lock_guard<std::mutex> lock(g_reuse_mutex);
+    if (g_kept_randomized && same(*g_kept_randomized)) {
+      kept_rank = g_kept_randomized->rank;
+      if (kept_rank >= opt.max_rank) {
+        ++g_randomized_served;
+        return std::optional<SvdResult>(leading(g_kept_randomized->r, opt.max_rank));
+      }
+    }
+  }
+  // Twice the request, and at least twice the kept one: the ranks computed in a search grow
+  // geometrically, so together they cost about two of the largest.
+  SvdOptions big = opt;
+  big.max_rank = std::min(scope_rank, (std::max(2 * opt.max_rank, 2 * kept_rank) + 63) / 64 * 64);
+  // At most the largest rank that the automatic choice still factorizes randomized (opt's is).
+  for (int lo = opt.max_rank, hi = big.max_rank; lo < hi;) {
+    big.max_rank = lo + (hi - lo + 1) / 2;
+    if (resolved_method(size_t(B.rows()), size_t(B.cols()), big) == SvdMethod::randomized) lo = big.max_rank;
+    else hi = big.max_rank - 1;
+    big.max_rank = lo;
+  }
+  BTFC_ASSIGN_OR_RETURN(SvdResult r, randomized_svd(B, big));
+  std::lock_guard<std::mutex> lock(g_reuse_mutex);
+  ++g_randomized_computed, ++g_randomized_served;
+  SvdResult t = leading(r, opt.max_rank);
+  if (g_randomized_scopes > 0 && (!g_kept_randomized || !same(*g_kept_randomized) || g_kept_randomized->rank < big.max_rank)) {
+    auto k = std::make_unique<KeptRandomized>();
+    k->fingerprint = fp, k->m = B.rows(), k->n = B.cols(), k->oversample = opt.oversample, k->power_iters = opt.power_iters;
+    k->scheme = int(opt.scheme), k->seed = opt.seed, k->sparse = opt.sparse_sketch, k->rank = big.max_rank;
+    k->r = std::move(r);
+    g_kept_randomized = std::move(k);
+  }
+  return std::optional<SvdResult>(std::move(t));
+}
+
+}  // namespace
+
 Result<SvdResult> truncated_svd(const float* B, size_t m, size_t n, const SvdOptions& opt) {
   if (m == 0 || n == 0) return invalid_argument("SVD of an empty matrix");
   if (opt.max_rank < 1) return invalid_argument("SVD rank must be >= 1");
   ConstMapF map(B, Index(m), Index(n));
-  return resolved_method(m, n, opt) == SvdMethod::exact ? exact_svd(map, opt) : randomized_svd(map, opt);
+  if (resolved_method(m, n, opt) == SvdMethod::exact) return exact_svd(map, opt);
+  BTFC_ASSIGN_OR_RETURN(std::optional<SvdResult> kept, reused_randomized(map, opt));
+  if (kept) return std::move(*kept);
+  return randomized_svd(map, opt);
 }
 
 SvdMethod resolved_method(size_t m, size_t n, const SvdOptions& opt) {
@@ -739,6 +828,26 @@ ExactSvdReuse::ExactSvdReuse() {
 ExactSvdReuse::~ExactSvdReuse() {
   std::lock_guard<std::mutex> lock(g_reuse_mutex);
   if (--g_reuse_scopes == 0) g_reuse.clear();
+}
+
+RandomizedSvdReuse::RandomizedSvdReuse(int max_rank) {
+  std::lock_guard<std::mutex> lock(g_reuse_mutex);
+  if (g_randomized_scopes++ == 0) g_randomized_rank = max_rank;
+}
+
+RandomizedSvdReuse::~RandomizedSvdReuse() {
+  std::lock_guard<std::mutex> lock(g_reuse_mutex);
+  if (--g_randomized_scopes == 0) g_kept_randomized.reset(), g_randomized_rank = 0;
+}
+
+size_t RandomizedSvdReuse::computed() {
+  std::lock_guard<std::mutex> lock(g_reuse_mutex);
+  return g_randomized_computed;
+}
+
+size_t RandomizedSvdReuse::served() {
+  std::lock_guard<std::mutex> lock(g_reuse_mutex);
+  return g_randomized_served;
 }
 
 size_t ExactSvdReuse::reuses() {

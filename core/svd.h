@@ -62,6 +62,10 @@ struct SvdOptions {
   // B S G on its own, without the buffer (the out-of-core plan's choice under a tight memory
   // limit). Unused in core.
   bool sketch_sums = true;
+  // Inside a RandomizedSvdReuse scope (below): a randomized factorization may be served as the
+  // leading max_rank components of a larger randomized one of the same matrix. For callers whose
+  // models at different ranks are nested truncations anyway (fmf's rank), not for target_rel_error.
+  bool truncation_ok = false;
   Progress* progress = nullptr;
 };
 
@@ -181,6 +185,28 @@ class ExactSvdReuse {
   ExactSvdReuse(const ExactSvdReuse&) = delete;
   ExactSvdReuse& operator=(const ExactSvdReuse&) = delete;
   static size_t reuses();  // how many exact SVDs were served from it (tests)
+};
+
+// While one of these is alive (a byte-budget search over fmf's rank, codecs/target.cpp), a
+// randomized truncated_svd with opt.truncation_ok and max_rank r <= max_rank is served from one
+// randomized SVD of the same matrix (fingerprint, shape and options) at a rank R >= r, truncated
+// to its leading r components. When the kept one is smaller (or of another matrix), a new one
+// at R = min(max_rank, twice the larger of r and the kept rank, rounded up to 64) replaces it:
+// a search computes a few factorizations of geometrically growing rank, not one per probe.
+// Why: each probe of a budget search was a whole randomized SVD, so a budget search could not
+// afford the large ranks that quantized factors make affordable (docs/benchmarks.md). The
+// leading components of a rank-R sketch are at least as accurate as a rank-r one's (more
+// oversampling), but not the same bits: a model from a search can differ from the same spec
+// encoded alone, within the randomized SVD's accuracy. Holds one factorization (m + n) R floats.
+// Not for concurrent searches.
+class RandomizedSvdReuse {
+ public:
+  explicit RandomizedSvdReuse(int max_rank);
+  ~RandomizedSvdReuse();
+  RandomizedSvdReuse(const RandomizedSvdReuse&) = delete;
+  RandomizedSvdReuse& operator=(const RandomizedSvdReuse&) = delete;
+  static size_t computed();  // randomized SVDs the scopes computed (tests)
+  static size_t served();    // truncations they served, computed ones included (tests)
 };
 
 }  // namespace btfc

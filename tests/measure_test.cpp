@@ -169,6 +169,54 @@ TEST(Target, ByteBudgetProbesNoKnobAboveTheCodecsLimit) {
   EXPECT_EQ(int(own->knob_value), 12);
 }
 
+TEST(Target, FmfByteBudgetLimitIsAQuarterOfTheSmallSideUpTo1024) {
+  // fmf's budget limit: a quarter of the matrix's small side, at most 1024 where the SVD is
+  // randomized (small side > 4096), and at least one rank per 64 texels.
+  auto desc = [](int w, int h) {
+    BtfDesc d;
+    d.width = w, d.height = h;
+    d.lights = d.views = DirectionSet::ubo2003();
+    return d;
+  };
+  EXPECT_EQ(fmf_codec().budget_knob_limit(desc(40, 40)), 1600 / 4);    // exact: small side 1600
+  EXPECT_EQ(fmf_codec().budget_knob_limit(desc(64, 64)), 4096 / 4);    // exact: small side 4096
+  EXPECT_EQ(fmf_codec().budget_knob_limit(desc(80, 80)), 1024);        // randomized: 6400 / 4 capped
+  EXPECT_EQ(fmf_codec().budget_knob_limit(desc(128, 128)), 1024);      // was 256 (16384 / 64)
+  EXPECT_EQ(fmf_codec().budget_knob_limit(desc(512, 512)), 512 * 512 / 64);  // texels / 64 above
+}
+
+TEST(Target, FmfByteBudgetProbesShareRandomizedFactorizations) {
+  // 40 x 40 texels (small side 1600): randomized below rank 184, where the probes take the
+  // leading components of a few factorizations of growing rank (RandomizedSvdReuse) instead of
+  // one each. The chosen model fits and is at least as accurate as its spec encoded alone.
+  const Btf b = small_btf(40, 40);
+  Context ctx;
+  const size_t computed0 = RandomizedSvdReuse::computed(), served0 = RandomizedSvdReuse::served();
+  const double budget = 1.5e5;  // about rank 120 with 8-bit factors
+  auto c = choose_for_target(b, "fmf:precision=q:bits=8", Target{Target::Kind::max_bytes, budget}, ctx);
+  ASSERT_TRUE(c.ok()) << c.status().message();
+  const size_t computed = RandomizedSvdReuse::computed() - computed0, served = RandomizedSvdReuse::served() - served0;
+  std::printf("chose %s (%.0f bytes, %.2f dB) after %zu probes: %zu randomized SVDs served %zu of them\n", c->spec.c_str(), c->measure,
+              c->psnr, c->probes.size(), computed, served);
+  EXPECT_LE(c->model->payload_bytes(), budget);
+  bool randomized = false;
+  for (const auto& [k, v] : c->model->stats().notes) randomized |= k == "svd.rgb" && v == "randomized";
+  EXPECT_TRUE(randomized) << "the chosen rank is below the exact path's";
+  EXPECT_GE(served, 4u);
+  EXPECT_LE(2 * computed, served) << "at least two probes per factorization";
+  auto again = resolve_spec(c->spec);
+  ASSERT_TRUE(again.ok());
+  auto m = again->first->encode(b, again->second, ctx);
+  ASSERT_TRUE(m.ok());
+  Btf x, y;
+  ASSERT_TRUE(c->model->decode_all(x).ok());
+  ASSERT_TRUE(m.value()->decode_all(y).ok());
+  auto ex = compare_btf(b, x, false), ey = compare_btf(b, y, false);
+  ASSERT_TRUE(ex.ok() && ey.ok());
+  std::printf("searched model %.6f, alone %.6f relative L2\n", ex->rel_l2, ey->rel_l2);
+  EXPECT_LE(ex->rel_l2, 1.002 * ey->rel_l2);
+}
+
 TEST(Target, FmfByteBudgetReachesAnyRankWhereTheExactSvdServesAll) {
   // A matrix whose small side is <= 4096 is factorized exactly at one cost for every rank
   // (core/svd.h), so fmf's budget limit is a quarter of that side, and the search computes the

@@ -680,6 +680,67 @@ TEST(Svd, AutomaticPathIsExactForLargeRanksOfAModerateSide) {
   EXPECT_LE(high->rel_error_estimate(), low->rel_error_estimate());
 }
 
+TEST(Svd, RandomizedReuseServesTheLeadingComponentsOfALargerFactorization) {
+  // Inside a RandomizedSvdReuse scope (a byte-budget search), a randomized request of rank C
+  // with truncation_ok is served as the leading C components of one factorization at
+  // 2 C rounded up to 64 (128 for C = 40), kept for later requests up to that rank; a larger
+  // request computes a new one (doubling). The served components are exactly the larger
+  // factorization's, and their error is within 1 % of the Eckart-Young optimum.
+  const size_t m = 1100, n = 1500;
+  Eigen::VectorXd sigma;
+  const std::vector<float> b = slow_decay_matrix(m, n, 9, sigma);
+  auto optimum = [&](int C) { return std::sqrt(sigma.tail(sigma.size() - C).squaredNorm() / sigma.squaredNorm()); };
+  SvdOptions o;
+  o.method = SvdMethod::randomized, o.truncation_ok = true;
+  o.max_rank = 128;
+  auto direct128 = truncated_svd(b.data(), m, n, o);  // no scope: computed as asked
+  ASSERT_TRUE(direct128.ok());
+  ASSERT_EQ(direct128->S.size(), 128);
+  const size_t computed0 = RandomizedSvdReuse::computed(), served0 = RandomizedSvdReuse::served();
+  EXPECT_EQ(RandomizedSvdReuse::served(), served0) << "nothing served outside a scope";
+  {
+    const RandomizedSvdReuse scope(256);
+    for (int C : {40, 100, 128}) {
+      o.max_rank = C;
+      auto r = truncated_svd(b.data(), m, n, o);
+      ASSERT_TRUE(r.ok());
+      ASSERT_EQ(r->S.size(), C);
+      EXPECT_EQ(r->requested_rank, C);
+      EXPECT_EQ((r->U - direct128->U.leftCols(C)).cwiseAbs().maxCoeff(), 0.0f) << C;
+      EXPECT_EQ((r->SxV - direct128->SxV.leftCols(C)).cwiseAbs().maxCoeff(), 0.0f) << C;
+      EXPECT_EQ((r->S - direct128->S.head(C)).cwiseAbs().maxCoeff(), 0.0) << C;
+      const double err = actual_rel_error(b, m, n, *r);
+      std::printf("rank %d from rank 128: error %.6f, optimum %.6f\n", C, err, optimum(C));
+      EXPECT_LE(err, 1.01 * optimum(C)) << C;
+      EXPECT_GE(err, 0.9999 * optimum(C)) << C;
+      EXPECT_NEAR(r->rel_error_estimate(), err, 1e-3 * err) << C;
+    }
+    EXPECT_EQ(RandomizedSvdReuse::computed() - computed0, 1u) << "one factorization for the three";
+    EXPECT_EQ(RandomizedSvdReuse::served() - served0, 3u);
+    o.max_rank = 200;  // above the kept 128: a new one at min(256, 400)
+    auto r200 = truncated_svd(b.data(), m, n, o);
+    ASSERT_TRUE(r200.ok());
+    EXPECT_EQ(r200->S.size(), 200);
+    EXPECT_EQ(RandomizedSvdReuse::computed() - computed0, 2u);
+    EXPECT_LE(actual_rel_error(b, m, n, *r200), 1.01 * optimum(200));
+    o.max_rank = 300;  // above the scope's rank: computed as asked
+    auto r300 = truncated_svd(b.data(), m, n, o);
+    ASSERT_TRUE(r300.ok());
+    EXPECT_EQ(r300->S.size(), 300);
+    o.truncation_ok = false;
+    o.max_rank = 40;  // the caller does not allow it: computed as asked
+    auto own = truncated_svd(b.data(), m, n, o);
+    ASSERT_TRUE(own.ok());
+    EXPECT_EQ(RandomizedSvdReuse::served() - served0, 4u);
+    EXPECT_EQ(RandomizedSvdReuse::computed() - computed0, 2u);
+  }
+  o.truncation_ok = true;
+  auto after = truncated_svd(b.data(), m, n, o);  // the scope is gone, and what it kept
+  ASSERT_TRUE(after.ok());
+  EXPECT_EQ(RandomizedSvdReuse::served() - served0, 4u);
+  EXPECT_EQ(RandomizedSvdReuse::computed() - computed0, 2u);
+}
+
 TEST(Svd, ReuseServesAnExactSvdAgainAtAnotherRankWithTheSameResult) {
   const size_t m = 300, n = 200;
   const std::vector<float> b = test_matrix(m, n, 20, 5);

@@ -119,11 +119,14 @@ class FmfCodec final : public Codec {
   // budget of 1:50 - 1:100 buys (issue 22: at 1:100 on the textile, q8 rank 554 at 62.2 dB where
   // the limit's rank 64 gave 51.9), while ranks near the full side cost most (quantizing and
   // coding the widest factors) and gave less (q6 at rank 4096: 60.3 dB). Larger matrices: one per
-  // 64 texels, each randomized probe's cost growing with the rank.
+  // 64 texels, and at least min(small side / 4, 1024): the probes take the leading components of
+  // a few randomized SVDs of growing rank (RandomizedSvdReuse, core/svd.h), not one SVD each, and
+  // one per 64 texels stopped a search on 128 x 128 texels at rank 256, a quarter of what a 1:100
+  // budget buys with 8-bit factors (docs/benchmarks.md).
   long long budget_knob_limit(const BtfDesc& d) const override {
     const size_t small = std::min(d.abrdf_size(), d.num_texels());
     const long long per_texels = components_backed_by_texels(d);
-    return small <= k_exact_auto_max ? std::max(per_texels, (long long)(small / 4)) : per_texels;
+    return std::max(per_texels, (long long)std::min<size_t>(small / 4, small <= k_exact_auto_max ? small : 1024));
   }
   const StreamingEncoder* streaming() const override { return &fmf_streaming(); }
 
@@ -153,6 +156,7 @@ class FmfCodec final : public Codec {
     auto factor = [&](const std::string& name, const float* B, size_t rows, int max_rank) -> Status {
       opt.max_rank = max_rank;
       SvdOptions o = opt;
+      o.truncation_ok = true;  // a rank-C model is the leading C components of a larger one
       if (dfmf_target) o.target_rel_error = 0;
       BTFC_ASSIGN_OR_RETURN(SvdResult r, truncated_svd(B, rows, d.num_texels(), o));
       blocks.push_back(block_from_svd(name, std::move(r), cfg.half, max_rank, o.target_rel_error, stats));
