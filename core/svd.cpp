@@ -553,8 +553,10 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
   // The passes run btfc's OpenMP kernels; OpenBLAS's own pool, woken by the small products in
   // between (the orthonormalisation, the Ritz step), would spin (sched_yield) against them for the
   // 2 cores: 3.04-3.37 s against 2.80-2.89 s for the streamed SVD, which holds one BLAS thread
-  // (ooc_svd.cpp), at rank 32 q 1 at UBO2003 size.
-  const SingleThreadedBlas one_blas_thread;
+  // (ooc_svd.cpp), at rank 32 q 1 at UBO2003 size. Not from l = 256 on: there the products in
+  // between are GEMMs of seconds (orthonormalize_against's projections on a basis of thousands of
+  // columns, in double) that one thread ran for most of a rank-1024 SVD (docs/benchmarks.md).
+  const SingleThreadedBlas one_blas_thread(l < 256);
 
   // Few and small buffers, allocated once: fresh memory costs its page faults (1-6 ms per MB on
   // the VMs measured, docs/benchmarks.md), a sizeable part of a pass. W^T is the passes' own
