@@ -169,6 +169,16 @@ TEST(Target, ByteBudgetProbesNoKnobAboveTheCodecsLimit) {
   EXPECT_EQ(int(own->knob_value), 12);
 }
 
+// The search's chosen model decoded into x, and its spec encoded alone decoded into y.
+void decode_chosen_and_alone(const Btf& b, const TargetChoice& c, Context& ctx, Btf& x, Btf& y) {
+  auto again = resolve_spec(c.spec);
+  ASSERT_TRUE(again.ok());
+  auto m = again->first->encode(b, again->second, ctx);
+  ASSERT_TRUE(m.ok());
+  ASSERT_TRUE(c.model->decode_all(x).ok());
+  ASSERT_TRUE(m.value()->decode_all(y).ok());
+}
+
 TEST(Target, FmfByteBudgetLimitIsAQuarterOfTheSmallSideUpTo1024) {
   // fmf's budget limit: a quarter of the matrix's small side, at most 1024 where the SVD is
   // randomized (small side > 4096), and at least one rank per 64 texels.
@@ -204,13 +214,8 @@ TEST(Target, FmfByteBudgetProbesShareRandomizedFactorizations) {
   EXPECT_TRUE(randomized) << "the chosen rank is below the exact path's";
   EXPECT_GE(served, 4u);
   EXPECT_LE(2 * computed, served) << "at least two probes per factorization";
-  auto again = resolve_spec(c->spec);
-  ASSERT_TRUE(again.ok());
-  auto m = again->first->encode(b, again->second, ctx);
-  ASSERT_TRUE(m.ok());
   Btf x, y;
-  ASSERT_TRUE(c->model->decode_all(x).ok());
-  ASSERT_TRUE(m.value()->decode_all(y).ok());
+  ASSERT_NO_FATAL_FAILURE(decode_chosen_and_alone(b, *c, ctx, x, y));
   auto ex = compare_btf(b, x, false), ey = compare_btf(b, y, false);
   ASSERT_TRUE(ex.ok() && ey.ok());
   std::printf("searched model %.6f, alone %.6f relative L2\n", ex->rel_l2, ey->rel_l2);
@@ -236,13 +241,8 @@ TEST(Target, FmfByteBudgetReachesAnyRankWhereTheExactSvdServesAll) {
   EXPECT_GT(c->knob_value, 9);
   EXPECT_EQ(reuses + 1, c->probes.size());  // one decomposition for every probe
   // The chosen model is what a plain encode of its spec gives.
-  auto again = resolve_spec(c->spec);
-  ASSERT_TRUE(again.ok());
-  auto m = again->first->encode(b, again->second, ctx);
-  ASSERT_TRUE(m.ok());
   Btf x, y;
-  ASSERT_TRUE(c->model->decode_all(x).ok());
-  ASSERT_TRUE(m.value()->decode_all(y).ok());
+  ASSERT_NO_FATAL_FAILURE(decode_chosen_and_alone(b, *c, ctx, x, y));
   EXPECT_EQ(0, std::memcmp(x.data(), y.data(), x.size() * sizeof(float)));
 }
 
