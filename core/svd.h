@@ -195,9 +195,10 @@ class ExactSvdReuse {
 // a search computes a few factorizations of geometrically growing rank, not one per probe.
 // Why: each probe of a budget search was a whole randomized SVD, so a budget search could not
 // afford the large ranks that quantized factors make affordable (docs/benchmarks.md). The
-// leading components of a rank-R sketch are at least as accurate as a rank-r one's (more
-// oversampling), but not the same bits: a model from a search can differ from the same spec
-// encoded alone, within the randomized SVD's accuracy. Holds one factorization (m + n) R floats.
+// leading components of a rank-R factorization come from a larger sketch (more oversampling) and
+// are as accurate as a rank-r one's or more, but not the same bits: a model from a search can
+// differ from the same spec encoded alone, within the randomized SVD's accuracy (tests compare
+// both). Holds one factorization, (m + n) R floats.
 // Not for concurrent searches.
 class RandomizedSvdReuse {
  public:
