@@ -113,20 +113,18 @@ class FmfCodec final : public Codec {
   std::vector<std::string> budget_variants() const override {
     return {"precision=half", "precision=q:bits=8", "precision=q:bits=6", "precision=q:bits=5", "precision=q:bits=4"};
   }
-  // Where the exact SVD serves every rank at one cost (the matrix's small side <= 4096: the 64 x 64
-  // textile, any BTF of few texels or directions; a search computes it once, ExactSvdReuse), a
-  // byte budget may reach a quarter of that side: one rank per 64 texels was far below what a
-  // budget of 1:50 - 1:100 buys (issue 22: at 1:100 on the textile, q8 rank 554 at 62.2 dB where
-  // the limit's rank 64 gave 51.9), while ranks near the full side cost most (quantizing and
-  // coding the widest factors) and gave less (q6 at rank 4096: 60.3 dB). Larger matrices: one per
-  // 64 texels, and at least min(small side / 4, 1024): the probes take the leading components of
-  // a few randomized SVDs of growing rank (RandomizedSvdReuse, core/svd.h), not one SVD each, and
-  // one per 64 texels stopped a search on 128 x 128 texels at rank 256, a quarter of what a 1:100
-  // budget buys with 8-bit factors (docs/benchmarks.md).
+  // A quarter of the matrix's small side up to 1024, at least one rank per 64 texels. The probes
+  // are cheap here: where the exact SVD serves every rank at one cost (small side <= 4096: the
+  // 64 x 64 textile, any BTF of few texels or directions) a search computes it once
+  // (ExactSvdReuse); larger matrices take the leading components of a few randomized SVDs of
+  // growing rank (RandomizedSvdReuse, core/svd.h). One rank per 64 texels alone was far below what
+  // a budget of 1:50 - 1:100 buys (issue 22: at 1:100 on the textile, q8 rank 554 at 62.2 dB where
+  // rank 64 gave 51.9; on 128 x 128 texels rank 256, a quarter of what 1:100 buys with 8-bit
+  // factors), while ranks near the full side cost most (quantizing and coding the widest factors)
+  // and gave less (q6 at rank 4096: 60.3 dB).
   long long budget_knob_limit(const BtfDesc& d) const override {
-    const size_t small = std::min(d.abrdf_size(), d.num_texels());
-    const long long per_texels = components_backed_by_texels(d);
-    return std::max(per_texels, (long long)std::min<size_t>(small / 4, small <= k_exact_auto_max ? small : 1024));
+    const long long small = (long long)std::min(d.abrdf_size(), d.num_texels());
+    return std::max(components_backed_by_texels(d), std::min<long long>(small / 4, 1024));
   }
   const StreamingEncoder* streaming() const override { return &fmf_streaming(); }
 
