@@ -86,7 +86,7 @@ int main(int argc, char** argv) {
   compress->add_option("--seed", ca.seed, "random seed (randomized algorithms)");
   auto* tp = compress->add_option("--target-psnr", ca.target_psnr, "search the codec's quality knob for the cheapest setting reaching this PSNR (dB)");
   auto* ts = compress->add_option("--target-ssim", ca.target_ssim, "... reaching this mean SSIM over the BTF's images")->check(CLI::Range(0.0, 1.0));
-  auto* tb = compress->add_option("--max-bytes", ca.max_bytes, "... the most accurate setting whose payload fits in this many bytes")->check(CLI::PositiveNumber);
+  auto* tb = compress->add_option("--max-bytes", ca.max_bytes, "... the most accurate setting whose .btfc file fits in this many bytes")->check(CLI::PositiveNumber);
   tp->excludes(ts)->excludes(tb);
   ts->excludes(tb);
   compress->add_option("--max-memory", ca.max_memory, "BTF data held in memory at most (e.g. 2G; default 80% of available RAM); larger inputs stream (fmf)");

@@ -1,5 +1,7 @@
 // Budget targeting: pick a codec's quality knob so the model meets a target PSNR, a target mean
-// SSIM, or a byte budget ("fit a budget", spec README section 1.4).
+// SSIM, or a byte budget ("fit a budget", spec README section 1.4): the bytes of the model's .btfc
+// file (model_file_bytes, codec.h: payload, headers, directions, statistics), what a user's `ls`
+// shows; other model formats (a Bonn .btf) are not what the budget counts.
 //
 // Each codec marks one parameter as its quality knob (ParamSpec::quality_knob: larger = more
 // accurate and more bytes; fmf rank, lpyr y, lpca components, ...). The search encodes, decodes
@@ -26,12 +28,12 @@ namespace btfc {
 
 struct Target {
   enum class Kind { psnr, ssim, max_bytes } kind = Kind::psnr;
-  double value = 0;  // dB, mean SSIM in (0, 1], or payload bytes
+  double value = 0;  // dB, mean SSIM in (0, 1], or bytes of the model's .btfc file (model_file_bytes)
 };
 
 struct TargetProbe {
   double knob = 0;
-  double measure = 0;  // PSNR, mean SSIM or payload bytes
+  double measure = 0;  // PSNR, mean SSIM or file bytes
   bool meets = false;
 };
 

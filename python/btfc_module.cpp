@@ -235,7 +235,7 @@ PYBIND11_MODULE(btfc, m) {
       py::arg("target_ssim") = py::none(), py::arg("seed") = 1, py::arg("progress") = py::none(), py::arg("consume") = false,
       "Compresses a Btf with a spec string ('fmf:rank=32', 'lpca', 'mlvq:scheme=2', ...; unknown\n"
       "parameters are errors). At most one target: max_bytes (the most accurate setting whose\n"
-      "payload fits), target_psnr (dB) or target_ssim (mean SSIM): the codec's quality knob is\n"
+      ".btfc file, model.file_bytes, fits), target_psnr (dB) or target_ssim (mean SSIM): the codec's quality knob is\n"
       "searched as `btfc compress --max-bytes/--target-psnr/--target-ssim` does, and the chosen\n"
       "setting is in model.target. The same seed gives the same model as the CLI's --seed.\n"
       "consume=True hands the values over, as `btfc compress` does with its input: the encode may\n"

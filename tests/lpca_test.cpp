@@ -615,5 +615,5 @@ TEST(Lpca, MaxBytesSearchesComponentsAndPrecisionWithinTheBudget) {
   const Btf b = synth(8, 8, some_views({0, 9}));
   auto ref = encode(b, "lpca:clusters=2:components=2");
   ASSERT_TRUE(ref);
-  test::expect_budget_search_beats_half(b, "lpca:clusters=2", "lpca:clusters=2:precision=half", double(ref->payload_bytes()));
+  test::expect_budget_search_beats_half(b, "lpca:clusters=2", "lpca:clusters=2:precision=half", double(model_file_bytes(*ref, *find_codec("lpca")).value()));
 }

@@ -150,7 +150,7 @@ def test_eval_equals_cli(work, synth_file):
 def test_targets_and_budget(synth_file):
     b = btfc.open(str(synth_file))
     m = btfc.compress(b, "fmf:precision=half", max_bytes=60000)
-    assert m.payload_bytes <= 60000 and m.target["knob"] == "rank" and m.target["probes"]
+    assert m.file_bytes <= 60000 and m.payload_bytes < m.file_bytes and m.target["knob"] == "rank" and m.target["probes"]
     t = btfc.compress(b, "fmf", target_psnr=30)
     assert btfc.compare(b, t.decode(), ssim=False)["psnr"] >= 30
     with pytest.raises(btfc.Error, match="at most one"):
