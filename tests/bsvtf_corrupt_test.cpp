@@ -5,6 +5,7 @@
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <limits>
 
 #include "formats/bsvtf/bsvtf.h"
 #include "tests/bsvtf_fixture.h"
@@ -211,4 +212,45 @@ TEST(BsvtfCodec, MalformedTilePayloads) {
   EXPECT_FALSE(bsvtf::inflate_bytes(z.data(), z.size(), 99, o).ok());
   EXPECT_FALSE(bsvtf::inflate_bytes(z.data(), z.size(), 101, o).ok());
   EXPECT_FALSE(bsvtf::inflate_bytes(z.data(), z.size() - 2, 100, o).ok());
+}
+
+TEST(BsvtfCorruptOffset, ColourModel13) {
+  // A dfmf file with its own luminance offset (colour model 13, version 1.1): the offset is the
+  // f32 before the two CRCs. A bad offset, a 1.0 file claiming model 13, and an 11 <-> 13 swap
+  // (the header size then disagrees) are refused with the file's path.
+  auto m = make_model(40, 24, 4, 0.1, 3, 11, {}, 0.125f);
+  ASSERT_TRUE(m);
+  const std::string good = tmp_path("o13.bsvtf"), bad = tmp_path("o13bad.bsvtf");
+  ASSERT_TRUE(write_bsvtf(*m, BsvtfOptions{}, good, nullptr).ok());
+  const Bytes bytes = slurp(good);
+  ASSERT_EQ(get32(bytes, 44), 13u);
+  const uint32_t hb = get32(bytes, 12);
+  auto expect = [&](const Bytes& b, const std::string& needle) {
+    spit(bad, b);
+    auto r = BsvtfReader::open(bad);
+    ASSERT_FALSE(r.ok()) << needle;
+    EXPECT_EQ(r.status().code(), StatusCode::corrupt_data) << r.status().message();
+    EXPECT_NE(r.status().message().find(bad), std::string::npos) << r.status().message();
+    EXPECT_NE(r.status().message().find(needle), std::string::npos) << r.status().message();
+  };
+  for (float v : {0.0f, -1.0f, std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity()}) {
+    Bytes b = bytes;
+    uint32_t u;
+    std::memcpy(&u, &v, 4);
+    put32(b, hb - 12, u);
+    fix_crcs(b);
+    expect(b, "luminance offset");
+  }
+  Bytes b = bytes;
+  b[10] = 0;  // minor version 0
+  fix_crcs(b);
+  expect(b, "version 1.1");
+  b = bytes;
+  put32(b, 44, 11);  // model 11: 4 header bytes too many
+  fix_crcs(b);
+  expect(b, "header_bytes");
+  b = bytes;
+  put32(b, 44, 12);
+  fix_crcs(b);
+  expect(b, "colour model 12");
 }

@@ -51,9 +51,10 @@ inline std::vector<float> orthonormal(size_t rows, int C, unsigned seed) {
   return u;
 }
 
-// color model 0 (one "rgb" block) or 11 (y, u, v blocks with C, C/2 + 1, C/2 + 1 components).
+// color model 0 (one "rgb" block) or 11 (y, u, v blocks with C, C/2 + 1, C/2 + 1 components,
+// luminance offset `offset`).
 inline std::unique_ptr<btfc::Model> make_model(int w, int h, int C, double noise, unsigned seed, int color_model = 0,
-                                               std::vector<float> textures = {}) {
+                                               std::vector<float> textures = {}, float offset = 1e-5f) {
   const btfc::BtfDesc d = small_desc(w, h);
   std::vector<btfc::FmfFactors> blocks;
   const bool dfmf = color_model != 0 && color_model != 12;
@@ -70,7 +71,7 @@ inline std::unique_ptr<btfc::Model> make_model(int w, int h, int C, double noise
     f.S.assign(size_t(f.C), 1.0f);
     blocks.push_back(std::move(f));
   }
-  auto m = btfc::make_fmf_model(d, color_model, std::move(blocks), nullptr, nullptr, false);
+  auto m = btfc::make_fmf_model(d, color_model, std::move(blocks), nullptr, nullptr, false, offset);
   return m.ok() ? std::move(m).value() : nullptr;
 }
 

@@ -8,6 +8,8 @@
 #include <iterator>
 
 #include "formats/bsvtf/bsvtf.h"
+#include "formats/bsvtf/bsvtf_export.h"
+#include "formats/bsvtf/tile_cache.h"
 #include "core/dct.h"
 #include "tests/bsvtf_fixture.h"
 
@@ -203,6 +205,114 @@ TEST(Bsvtf, DfmfBlocks) {
     for (size_t i = 0; i < dec.size(); ++i) max_abs = std::max(max_abs, std::abs(double(dec[i]) - v.SxV[i]));
     EXPECT_LE(max_abs, error_bound(rd.blocks()[size_t(b)])) << "block " << b;
     EXPECT_GT(max_abs, 0.05 * error_bound(rd.blocks()[size_t(b)])) << "block " << b;
+  }
+}
+
+// RGB of texel i at row r (= light + lights x view) from decoded dfmf blocks (Y', U', V'
+// factors, texels x C and rows x C each), by bsvtf.h's evaluation with luminance offset e.
+static std::array<double, 3> dfmf_rgb(const std::vector<std::vector<float>>& tex, const std::vector<std::vector<float>>& abrdf,
+                                      const std::vector<uint32_t>& C, size_t i, size_t r, double e) {
+  double yuv[3];
+  for (int b = 0; b < 3; ++b) {
+    yuv[b] = 0;
+    for (uint32_t c = 0; c < C[size_t(b)]; ++c) yuv[b] += double(abrdf[size_t(b)][r * C[size_t(b)] + c]) * tex[size_t(b)][i * C[size_t(b)] + c];
+  }
+  const double y = std::exp(yuv[0]) - e, u = yuv[1] * (y + e), v = yuv[2] * (y + e);
+  return {y + 1.13983 * v, y - 0.39465 * u - 0.5806 * v, y + 2.03211 * u};
+}
+
+TEST(Bsvtf, DfmfWithItsOwnOffsetIsColourModel13) {
+  // btfc's dfmf encodes pick the luminance offset from the data: such a model is written as
+  // colour model 13 (version 1.1) with its offset; Bonn's 1e-5 stays model 11 in a 1.0 file.
+  const float offset = 0.25f;
+  auto m = make_model(70, 40, 6, 0.1, 5, 11, {}, offset);
+  auto m11 = make_model(70, 40, 6, 0.1, 5, 11);
+  ASSERT_TRUE(m && m11);
+  const std::string p = tmp_path("dfmf13.bsvtf"), p11 = tmp_path("dfmf11.bsvtf");
+  write(*m, p, 95);
+  write(*m11, p11, 95);
+  auto rd = BsvtfReader::open(p).value();
+  auto rd11 = BsvtfReader::open(p11).value();
+  EXPECT_EQ(rd.color_model(), 13);
+  EXPECT_EQ(rd.luminance_offset(), offset);
+  EXPECT_EQ(rd11.color_model(), 11);
+  EXPECT_EQ(rd11.luminance_offset(), 1e-5f);
+  const std::vector<uint8_t> b13 = slurp(p), b11 = slurp(p11);
+  ASSERT_GT(b11.size(), 12u);
+  EXPECT_EQ(b13[10], 1);  // minor version
+  EXPECT_EQ(b11[10], 0);
+  EXPECT_EQ(rd.header_bytes(), rd11.header_bytes() + 4);  // the offset; the same factors otherwise
+  // The file evaluates to the model: decoded factors through the formula with the stored offset
+  // agree with Model::eval; with Bonn's offset instead they would not.
+  std::vector<std::vector<float>> tex(3), abrdf(3);
+  std::vector<uint32_t> C(3);
+  for (int b = 0; b < 3; ++b) {
+    tex[size_t(b)] = rd.decode_eigen_textures(b).value();
+    abrdf[size_t(b)] = rd.decode_eigen_abrdfs(b).value();
+    C[size_t(b)] = rd.blocks()[size_t(b)].components;
+  }
+  // The model's own factors through the same formula: the model's values (float rounding).
+  std::vector<std::vector<float>> mtex(3), mabrdf(3);
+  const FmfFactorsView fv = fmf_factors(*m).value();
+  for (size_t b = 0; b < 3; ++b) {
+    mtex[b].assign(fv.blocks[b].SxV, fv.blocks[b].SxV + fv.blocks[b].texels * size_t(fv.blocks[b].C));
+    mabrdf[b].assign(fv.blocks[b].U, fv.blocks[b].U + fv.blocks[b].rows * size_t(fv.blocks[b].C));
+  }
+  const BtfDesc& d = m->desc();
+  double err = 0, err_bonn = 0, err_exact = 0, ref = 0;
+  for (int y = 0; y < d.height; y += 7)
+    for (int x = 0; x < d.width; x += 5)
+      for (int v = 0; v < d.num_views(); ++v)
+        for (int l = 0; l < d.num_lights(); ++l) {
+          float want[3];
+          m->eval(x, y, l, v, want);
+          const size_t i = size_t(y) * size_t(d.width) + size_t(x), r = size_t(l) + size_t(d.num_lights()) * size_t(v);
+          const auto got = dfmf_rgb(tex, abrdf, C, i, r, rd.luminance_offset()), bonn = dfmf_rgb(tex, abrdf, C, i, r, 1e-5);
+          const auto exact = dfmf_rgb(mtex, mabrdf, C, i, r, rd.luminance_offset());
+          for (int c = 0; c < 3; ++c) err_exact += (exact[size_t(c)] - want[c]) * (exact[size_t(c)] - want[c]);
+          for (int c = 0; c < 3; ++c)
+            err += (got[size_t(c)] - want[c]) * (got[size_t(c)] - want[c]), err_bonn += (bonn[size_t(c)] - want[c]) * (bonn[size_t(c)] - want[c]),
+                ref += double(want[c]) * want[c];
+        }
+  ASSERT_GT(ref, 0);
+  std::printf("dfmf model 13: rel. error exact %.3g, file %.3g, file with offset 1e-5 %.3g\n", std::sqrt(err_exact / ref), std::sqrt(err / ref),
+              std::sqrt(err_bonn / ref));
+  EXPECT_LT(std::sqrt(err_exact / ref), 1e-5);
+  // Quality 95 tiles of noisy eigen-textures and half packets, through exp: 0.025 measured.
+  EXPECT_LE(std::sqrt(err / ref), 0.032);
+  EXPECT_GE(std::sqrt(err / ref), 0.75 * 0.032);
+  EXPECT_GT(std::sqrt(err_bonn / ref), 3 * std::sqrt(err / ref));  // 0.107 measured
+  // The tile cache shades with it too (its luminance): a small cache's run on the file gives
+  // finite errors below a converged one's SSIM.
+  auto sim = TileCacheSim::make(rd);
+  ASSERT_TRUE(sim.ok()) << sim.status().message();
+  TileCacheOptions o;
+  o.cache_tiles = 2, o.path.frames = 4, o.path.width = 48, o.path.height = 36;
+  auto run = sim->run(o);
+  ASSERT_TRUE(run.ok()) << run.status().message();
+  EXPECT_TRUE(std::isfinite(run->mean_error) && std::isfinite(run->mean_ssim));
+  EXPECT_LE(run->mean_ssim, 1.0);
+}
+
+TEST(Bsvtf, ExportsAttachTheStreamingFileOfEveryRgbAndDfmfModel) {
+  // `btfc export` (attach_bsvtf): rgb and dfmf of any offset get model.bsvtf; a factorization
+  // read from a Bonn file in another colour model (YCoCg, 4) exports without it, with a warning,
+  // and write_bsvtf refuses it as unsupported.
+  for (auto [color, offset, attached] : {std::tuple{0, 1e-5f, true}, std::tuple{11, 1e-5f, true}, std::tuple{11, 3.5f, true},
+                                         std::tuple{4, 1e-5f, false}}) {
+    auto m = make_model(20, 12, 4, 0.1, 8, color, {}, offset);
+    ASSERT_TRUE(m) << color;
+    gpu::ExportBundle bundle;
+    EXPECT_EQ(attach_bsvtf(bundle, *m, gpu::ExportOptions{}, BsvtfOptions{}, nullptr), attached) << color << " " << offset;
+    EXPECT_EQ(bool(bundle.write_extra), attached);
+    if (attached) {
+      EXPECT_TRUE(bundle.warnings.empty()) << bundle.warnings[0];
+    } else {
+      ASSERT_EQ(bundle.warnings.size(), 1u);
+      EXPECT_NE(bundle.warnings[0].find("colour models 0 and 11), this model's is 4"), std::string::npos) << bundle.warnings[0];
+      EXPECT_EQ(write_bsvtf(*m, BsvtfOptions{}, tmp_path("ycocg.bsvtf"), nullptr).code(), StatusCode::unsupported);
+      EXPECT_FALSE(std::filesystem::exists(tmp_path("ycocg.bsvtf")));
+    }
   }
 }
 

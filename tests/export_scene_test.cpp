@@ -3,11 +3,15 @@
 // and the cut model model.bsvtf is built from.
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
 #include <cmath>
+#include <filesystem>
 #include <random>
 
 #include "codecs/fmf/fmf.h"
 #include "core/interp.h"
+#include "formats/bsvtf/bsvtf.h"
 #include "formats/gpu/export.h"
 #include "tests/export_test_util.h"
 
@@ -162,5 +166,16 @@ TEST(Scene, SceneModelIsWhatTheExportKeeps) {
             for (int c = 0; c < 3; ++c) worst = std::max(worst, std::fabs(double(e[c]) - w[c]) / rms);
           }
     EXPECT_LE(worst, 4e-6) << spec;
+    // Its BSVTF keeps the model's luminance offset (colour model 13 unless Bonn's 1e-5).
+    if (spec.find("dfmf") != std::string::npos) {
+      const std::string p = (std::filesystem::temp_directory_path() / ("btfc_scene_" + std::to_string(::getpid()) + ".bsvtf")).string();
+      ASSERT_TRUE(write_bsvtf(*sm.value(), BsvtfOptions{}, p, nullptr).ok()) << spec;
+      auto rd = BsvtfReader::open(p);
+      std::filesystem::remove(p);
+      ASSERT_TRUE(rd.ok()) << rd.status().message();
+      const float e = fmf_factors(*m).value().drr_eps;
+      EXPECT_EQ(rd->color_model(), e == 1e-5f ? 11 : 13) << spec;
+      EXPECT_EQ(rd->luminance_offset(), e) << spec;
+    }
   }
 }

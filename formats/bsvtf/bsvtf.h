@@ -17,19 +17,21 @@
 // 151 x 151 x 3 rows), are packets interleaved with the tiles: each group's packet comes right
 // before its level-0 tile, so a client can start rendering after the first packet + tile.
 //
-// File format, version 1.0 (little-endian; also in docs/FORMAT.md, "BSVTF"):
+// File format, version 1.0 and 1.1 (little-endian; also in docs/FORMAT.md, "BSVTF"):
 //   header (header_bytes) | directory (num_entries x 40 bytes) | payloads (data_bytes)
-//   Header:  0  char[8] magic "BSVTF\r\n\x1a"     8 u16 major = 1    10 u16 minor = 0
+//   Header:  0  char[8] magic "BSVTF\r\n\x1a"     8 u16 major = 1    10 u16 minor = 0 (1 with model 13)
 //           12  u32 header_bytes   16 u32 width   20 u32 height      24 u32 tile T
 //           28  u32 border B       32 u32 comps K 36 u32 levels      40 u32 quality (1..100)
 //           44  u32 color model (0 = FMF rgb: block "rgb", rows = channels x lights x views;
-//                                11 = DFMF: blocks "y","u","v", rows = lights x views)
+//                                11 = DFMF: blocks "y","u","v", rows = lights x views;
+//                                13 = DFMF as 11 with its own luminance offset, stored below)
 //           48  u32 channels       52 u32 num_lights  56 u32 num_views   60 u32 num_blocks
 //           64  u64 num_entries    72 u64 data_bytes
 //           80  lights (num_lights x 3 f32, unit xyz), views (num_views x 3 f32)
 //               blocks: num_blocks x { char[8] name (NUL padded); u32 rows; u32 components C;
 //                       u32 groups = ceil(C / K); f32 range (max - min of SxV); f32 step[64]
 //                       (natural order, the quantisation steps of its tiles) }
+//               model 13 only: f32 luminance offset e (finite, > 0)
 //               u32 directory crc32; u32 header crc32 (of every header byte before it)
 //   Directory entry: 0 u8 kind (1 = ABRDF packet, 2 = tile)  1 u8 level  2 u16 block  4 u32 group
 //           8 u32 tx  12 u32 ty  16 u64 offset (from the file start)  24 u32 stored bytes
@@ -44,8 +46,12 @@
 //   (65504) for HDR eigen-textures above ~256.
 // Evaluation (what a renderer does with the decoded data): rho(x, l, v) = sum_c U_c(row) V_c(x)
 // per block; color 0: row = c + channels (l + lights v) gives colour c directly; color 11:
-// Y' U' V' from the three blocks (row = l + lights v), Y = exp(Y') - 1e-5, U = U' (Y + 1e-5),
-// V = V' (Y + 1e-5), RGB = [1 0 1.13983; 1 -0.39465 -0.5806; 1 2.03211 0] YUV (codecs/fmf/fmf.h).
+// Y' U' V' from the three blocks (row = l + lights v), Y = exp(Y') - e, U = U' (Y + e),
+// V = V' (Y + e), RGB = [1 0 1.13983; 1 -0.39465 -0.5806; 1 2.03211 0] YUV (codecs/fmf/fmf.h),
+// e = 1e-5 (Bonn's) for color 11, the stored offset for color 13. Why 13 and not an offset for
+// every dfmf file: btfc's dfmf encodes pick their offset from the data (the automatic offset of
+// codecs/fmf/fmf.h), so most dfmf models have no BSVTF otherwise, while files of Bonn's offset
+// stay the 1.0 bytes; a 1.0 reader refuses a model-13 file by its unknown colour model.
 //
 // Contracts: write_bsvtf writes "<path>.tmp-<pid>" and renames; on failure nothing is left.
 // BsvtfReader::open reads and validates the header and directory (magic, version, CRCs, every
@@ -85,7 +91,8 @@ struct BsvtfReport {
 };
 
 // Writes the BSVTF of an fmf model. invalid_argument: not an fmf model, bad options;
-// unsupported: a Bonn colour model other than 0 (rgb) and 11 (dfmf); io_error on write.
+// unsupported: a Bonn colour model other than 0 (rgb) and 11 (dfmf; written as colour model 13
+// when its luminance offset is not 1e-5); io_error on write.
 Status write_bsvtf(const Model& fmf_model, const BsvtfOptions& options, const std::string& path, BsvtfReport* report);
 
 struct BsvtfBlock {
@@ -117,7 +124,8 @@ class BsvtfReader {
   const std::string& path() const { return m_path; }
   const bsvtf::Geometry& geometry() const { return m_geo; }
   int quality() const { return m_quality; }
-  int color_model() const { return m_color; }
+  int color_model() const { return m_color; }  // 0, 11 or 13
+  float luminance_offset() const { return m_offset; }  // e of models 11 (1e-5) and 13 (stored)
   int channels() const { return m_channels; }
   const DirectionSet& lights() const { return m_lights; }
   const DirectionSet& views() const { return m_views; }
@@ -149,6 +157,7 @@ class BsvtfReader {
   std::shared_ptr<int> m_fd;  // closed when the last copy goes
   bsvtf::Geometry m_geo;
   int m_quality = 0, m_color = 0, m_channels = 0;
+  float m_offset = 1e-5f;
   DirectionSet m_lights, m_views;
   std::vector<BsvtfBlock> m_blocks;
   std::vector<BsvtfEntry> m_entries;

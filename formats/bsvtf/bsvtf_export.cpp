@@ -10,11 +10,11 @@ bool attach_bsvtf(gpu::ExportBundle& bundle, const Model& model, const gpu::Expo
                   BsvtfReport* report) {
   auto fv = fmf_factors(model);
   if (!fv.ok()) return false;
-  if (fv->per_channel && fv->drr_eps != 1e-5f) {
-    // The textures hold any offset (evaluation.luminance_offset); the pinned BSVTF format holds
-    // colour model 11's only, so the export goes on without it rather than failing.
-    bundle.warnings.push_back("model.bsvtf not written: BSVTF stores Bonn's colour model 11 (luminance offset 1e-5) only, this dfmf model's offset is " +
-                              real_string(fv->drr_eps) + " (encode with fmf:color=dfmf:offset=1e-5 for a BSVTF file)");
+  if (fv->bonn_color_model != (fv->per_channel ? 11 : 0)) {
+    // A factorization read from a Bonn file in another colour model: its textures export, and
+    // the export goes on without the streaming file rather than failing (write_bsvtf: unsupported).
+    bundle.warnings.push_back("model.bsvtf not written: BSVTF stores FMF rgb and DFMF (Bonn colour models 0 and 11), this model's is " +
+                              std::to_string(fv->bonn_color_model));
     return false;
   }
   bundle.write_extra = [&model, opt, bo, report](const std::string& dir) -> Result<nlohmann::json> {

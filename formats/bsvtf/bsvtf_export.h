@@ -9,7 +9,8 @@ namespace btfc {
 
 // Sets bundle.write_extra to write model.bsvtf when `model` has factors; `report` (kept alive by
 // the caller until the bundle is written) receives what was written. Returns whether it did: not
-// for a dfmf model whose luminance offset is not colour model 11's (a warning in the bundle says so).
+// for a factorization in a Bonn colour model other than 0 and 11 (a warning in the bundle says
+// so). A dfmf model of any luminance offset has one (colour model 11 or 13, bsvtf.h).
 bool attach_bsvtf(gpu::ExportBundle& bundle, const Model& model, const gpu::ExportOptions& opt, const BsvtfOptions& bo,
                   BsvtfReport* report);
 

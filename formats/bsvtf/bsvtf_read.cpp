@@ -14,6 +14,7 @@
 #include "formats/bsvtf/bsvtf.h"
 
 #include "core/limits.h"
+#include "core/params.h"
 
 namespace btfc {
 namespace {
@@ -89,11 +90,13 @@ Result<BsvtfReader> BsvtfReader::open(const std::string& path) {
     return bad("header: " + std::to_string(levels) + " levels, but a " + std::to_string(width) + " x " + std::to_string(height) +
                " texture in " + std::to_string(tile) + "-texel tiles has " + std::to_string(r.m_geo.levels));
   if (quality < 1 || quality > 100) return bad("header: quality " + std::to_string(quality) + " outside [1, 100]");
-  if (color != 0 && color != 11) return bad("header: unknown colour model " + std::to_string(color));
-  if (channels < 1 || channels > 16 || (color == 11 && channels != 3)) return bad("header: " + std::to_string(channels) + " colour channels");
+  if (color != 0 && color != 11 && color != 13) return bad("header: unknown colour model " + std::to_string(color));
+  const bool dfmf = color != 0, own_offset = color == 13;  // 13: dfmf with its luminance offset stored (bsvtf.h)
+  if (own_offset && minor < 1) return bad("header: colour model 13 needs version 1.1, the file says 1." + std::to_string(minor));
+  if (channels < 1 || channels > 16 || (dfmf && channels != 3)) return bad("header: " + std::to_string(channels) + " colour channels");
   if (nb != (color == 0 ? 1u : 3u)) return bad("header: " + std::to_string(nb) + " blocks for colour model " + std::to_string(color));
   if (nl < 1 || nv < 1 || nl > (1u << 20) || nv > (1u << 20)) return bad("header: direction counts out of range");
-  const uint64_t expect_header = 80 + 12 * (uint64_t(nl) + nv) + 280 * uint64_t(nb) + 8;
+  const uint64_t expect_header = 80 + 12 * (uint64_t(nl) + nv) + 280 * uint64_t(nb) + (own_offset ? 4 : 0) + 8;
   if (header_bytes != expect_header)
     return bad("header: header_bytes " + std::to_string(header_bytes) + " disagrees with its contents (" + std::to_string(expect_header) + ")");
   if (header_bytes > size) return bad("truncated: header of " + std::to_string(header_bytes) + " bytes, file of " + std::to_string(size));
@@ -119,7 +122,7 @@ Result<BsvtfReader> BsvtfReader::open(const std::string& path) {
     }
     set->identify();
   }
-  const char* names[3] = {color == 0 ? "rgb" : "y", "u", "v"};
+  const char* names[3] = {dfmf ? "y" : "rgb", "u", "v"};
   for (uint32_t b = 0; b < nb; ++b) {
     BsvtfBlock blk;
     char name[9] = {};
@@ -130,7 +133,7 @@ Result<BsvtfReader> BsvtfReader::open(const std::string& path) {
     for (float& s : blk.steps) s = in.f32();
     const std::string where = "header: block " + std::to_string(b) + " ('" + blk.name + "')";
     if (blk.name != names[b]) return bad(where + ": expected block '" + names[b] + "'");
-    if (blk.rows != (color == 0 ? channels : 1u) * uint64_t(nl) * nv) return bad(where + ": " + std::to_string(blk.rows) + " rows disagree with the directions");
+    if (blk.rows != (dfmf ? 1u : channels) * uint64_t(nl) * nv) return bad(where + ": " + std::to_string(blk.rows) + " rows disagree with the directions");
     if (blk.components < 1 || blk.components > 65536 || blk.groups != (blk.components + comps - 1) / comps)
       return bad(where + ": " + std::to_string(blk.components) + " components in " + std::to_string(blk.groups) + " groups");
     if (!(std::isfinite(blk.range) && blk.range > 0)) return bad(where + ": range is not a positive number");
@@ -138,6 +141,11 @@ Result<BsvtfReader> BsvtfReader::open(const std::string& path) {
       if (!(std::isfinite(s) && s > 0)) return bad(where + ": a quantisation step is not a positive number");
     for (uint32_t gi = 0; gi < blk.groups; ++gi) r.m_texture_block.push_back(int(b)), r.m_texture_group.push_back(int(gi));
     r.m_blocks.push_back(blk);
+  }
+  if (own_offset) {
+    r.m_offset = in.f32();
+    if (!(std::isfinite(r.m_offset) && r.m_offset > 0))
+      return bad("header: luminance offset " + real_string(r.m_offset) + " is not a positive number");
   }
   const uint32_t dir_crc = in.u32();
   const size_t T = r.textures();

@@ -173,13 +173,16 @@ Status write_bsvtf(const Model& model, const BsvtfOptions& opt, const std::strin
   const auto t0 = Clock::now();
   BTFC_ASSIGN_OR_RETURN(FmfFactorsView f, fmf_factors(model));
   const BtfDesc& desc = model.desc();
-  const int color = f.per_channel ? 11 : 0;
-  if (f.bonn_color_model != color)
+  if (f.bonn_color_model != (f.per_channel ? 11 : 0))
     return unsupported(path + ": the fmf model uses Bonn colour model " + std::to_string(f.bonn_color_model) +
                        "; BSVTF stores FMF rgb (model 0) and DFMF (model 11) models only");
-  if (f.per_channel && f.drr_eps != 1e-5f)
-    return unsupported(path + ": the dfmf model's luminance offset is " + real_string(f.drr_eps) +
-                       "; BSVTF stores Bonn's colour model 11 (offset 1e-5) only: encode with fmf:color=dfmf:offset=1e-5");
+  // A dfmf model with Bonn's offset is colour model 11 in a version 1.0 file, as before; with any
+  // other offset (btfc's default picks one from the data) colour model 13, which stores it: a
+  // 1.1 file that a 1.0 reader refuses by its colour model (bsvtf.h).
+  const bool own_offset = f.per_channel && f.drr_eps != 1e-5f;
+  const int color = f.per_channel ? (own_offset ? 13 : 11) : 0;
+  if (own_offset && !(std::isfinite(f.drr_eps) && f.drr_eps > 0))
+    return invalid_argument(path + ": the dfmf model's luminance offset " + real_string(f.drr_eps) + " is not a positive number");
   if (opt.quality < 1 || opt.quality > 100) return invalid_argument(path + ": quality " + std::to_string(opt.quality) + " outside [1, 100]");
   auto geo = Geometry::make(desc.width, desc.height, opt.tile, opt.border, 4);
   if (!geo.ok()) return geo.status().with_context(path);
@@ -213,7 +216,8 @@ Status write_bsvtf(const Model& model, const BsvtfOptions& opt, const std::strin
   }
 
   // Header, then the directory with absolute offsets.
-  const uint64_t header_bytes = 80 + 12 * uint64_t(desc.num_lights() + desc.num_views()) + 280 * uint64_t(f.blocks.size()) + 8;
+  const uint64_t header_bytes =
+      80 + 12 * uint64_t(desc.num_lights() + desc.num_views()) + 280 * uint64_t(f.blocks.size()) + (own_offset ? 4 : 0) + 8;
   uint64_t offset = header_bytes + 40 * uint64_t(payloads.size()), data_bytes = 0;
   Out dir;
   for (size_t e = 0; e < payloads.size(); ++e) {
@@ -240,7 +244,7 @@ Status write_bsvtf(const Model& model, const BsvtfOptions& opt, const std::strin
   }
   Out h;
   h.bytes("BSVTF\r\n\x1a", 8);
-  h.u16(1), h.u16(0), h.u32(uint32_t(header_bytes)), h.u32(uint32_t(g.width)), h.u32(uint32_t(g.height));
+  h.u16(1), h.u16(own_offset ? 1 : 0), h.u32(uint32_t(header_bytes)), h.u32(uint32_t(g.width)), h.u32(uint32_t(g.height));
   h.u32(uint32_t(g.tile)), h.u32(uint32_t(g.border)), h.u32(uint32_t(g.comps)), h.u32(uint32_t(g.levels)), h.u32(uint32_t(opt.quality));
   h.u32(uint32_t(color)), h.u32(uint32_t(desc.channels)), h.u32(uint32_t(desc.num_lights())), h.u32(uint32_t(desc.num_views()));
   h.u32(uint32_t(f.blocks.size())), h.u64(payloads.size()), h.u64(data_bytes);
@@ -254,6 +258,7 @@ Status write_bsvtf(const Model& model, const BsvtfOptions& opt, const std::strin
     h.f32(ranges[bi]);
     for (float s : steps[bi]) h.f32(s);
   }
+  if (own_offset) h.f32(f.drr_eps);
   h.u32(uint32_t(crc32(0, dir.b.data(), uInt(dir.b.size()))));
   h.u32(uint32_t(crc32(0, h.b.data(), uInt(h.b.size()))));
   if (h.b.size() != header_bytes) return codec_error(path + ": internal error: header size mismatch");

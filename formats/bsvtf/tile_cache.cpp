@@ -42,7 +42,7 @@ Result<TileCacheSim> TileCacheSim::make(const BsvtfReader& f) {
     s.m_block.push_back(f.texture_block(t)), s.m_group.push_back(f.texture_group(t));
   }
   for (const BsvtfBlock& b : f.blocks()) s.m_block_rows.push_back(b.rows), s.m_block_components.push_back(b.components);
-  s.m_color = f.color_model(), s.m_channels = f.channels();
+  s.m_dfmf = f.color_model() != 0, s.m_offset = f.luminance_offset(), s.m_channels = f.channels();
   s.m_lights = int(f.lights().size()), s.m_views = int(f.views().size());
   s.m_header_bytes = f.header_bytes();
   return s;
@@ -249,8 +249,8 @@ struct CacheRunState {
     std::vector<float> coef(sim.m_textures * size_t(C) * size_t(K), 0.0f);
     for (size_t t = 0; t < sim.m_textures; ++t)
       for (int c = 0; c < C; ++c) {
-        if (sim.m_color == 11 && c != sim.m_block[t]) continue;
-        const size_t row = sim.m_color == 11 ? size_t(light + sim.m_lights * view) : size_t(c + C * (light + sim.m_lights * view));
+        if (sim.m_dfmf && c != sim.m_block[t]) continue;
+        const size_t row = sim.m_dfmf ? size_t(light + sim.m_lights * view) : size_t(c + C * (light + sim.m_lights * view));
         for (int k = 0; k < K; ++k) coef[(t * size_t(C) + size_t(c)) * size_t(K) + size_t(k)] = sim.m_packets[t][row * size_t(K) + size_t(k)];
       }
     std::vector<float> lum_ref(fb.size(), 0.0f), lum_res(fb.size(), 0.0f);
@@ -279,10 +279,10 @@ struct CacheRunState {
     const float peak = *std::max_element(lum_ref.begin(), lum_ref.end());
     stats.ssim = ssim_gray(lum_ref.data(), lum_res.data(), W, H, peak > 0 ? peak : 1.0);
   }
-  // Luminance of a shaded value: colour model 11 values are Y' U' V' (bsvtf.h).
+  // Luminance of a shaded value: colour model 11 and 13 values are Y' U' V' (bsvtf.h).
   float luminance(float* v) const {
-    if (sim.m_color == 11) {
-      const float y = std::exp(v[0]) - 1e-5f, u = v[1] * (y + 1e-5f), w = v[2] * (y + 1e-5f);
+    if (sim.m_dfmf) {
+      const float e = sim.m_offset, y = std::exp(v[0]) - e, u = v[1] * (y + e), w = v[2] * (y + e);
       const float r = y + 1.13983f * w, gg = y - 0.39465f * u - 0.5806f * w, b = y + 2.03211f * u;
       v[0] = r, v[1] = gg, v[2] = b;
     }

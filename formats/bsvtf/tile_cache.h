@@ -115,7 +115,9 @@ class TileCacheSim {
   std::vector<uint32_t> m_packet_bytes;
   std::vector<int> m_block, m_group;         // per texture
   std::vector<uint32_t> m_block_rows, m_block_components;
-  int m_color = 0, m_channels = 3, m_lights = 1, m_views = 1;
+  bool m_dfmf = false;     // colour model 11 or 13: blocks y, u, v
+  float m_offset = 1e-5f;  // their luminance offset
+  int m_channels = 3, m_lights = 1, m_views = 1;
   uint64_t m_header_bytes = 0;
 };
 

@@ -58,6 +58,10 @@ for f in "$SLICE"/*.jpg; do cut "$f" 24x24+120+120 "$W/slice24/$(basename "$f")"
 "$BTFC" -q -f bsvtf --tile 8 "$W/slice24_fmf.btfc" -o "$C/fuzz_bsvtf/slice24_fmf_3levels.bsvtf"
 "$BTFC" -q -f bsvtf --tile 8 tests/golden/fmf.btfc -o "$C/fuzz_bsvtf/golden_fmf.bsvtf"
 "$BTFC" -q -f bsvtf --tile 8 tests/golden/fmf_dfmf.btfc -o "$C/fuzz_bsvtf/golden_fmf_dfmf.bsvtf"
+# A dfmf model with the offset from the data: colour model 13 (BSVTF 1.1, the offset in the header).
+"$BTFC" -q -f synth --width 8 --height 8 --views 0,0 --seed 11 --scale 30 -o "$W/synth8.btfc"
+"$BTFC" -q -f compress "$W/synth8.btfc" -c fmf:color=dfmf:rank=4:chroma_rank=2 -o "$W/synth8_dfmf.btfc"
+"$BTFC" -q -f bsvtf --quality 50 "$W/synth8_dfmf.btfc" -o "$C/fuzz_bsvtf/synth8_dfmf_own_offset_q50.bsvtf"
 
 # Index streams of mlvq models: tensors *.idx, merge.lum, merge.chroma, texel.idx.
 python3 - "$C/fuzz_mlvq_indices" tests/golden/mlvq.btfc "$W"/*_mlvq*.btfc <<'PY'
