@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <future>
+#include <system_error>
 
 #include "core/quant.h"
 
@@ -37,15 +39,24 @@ QuantizedFactors quantize_factors(const std::string& name, const MatrixXfR& U, c
   std::vector<float> us, ss;
   quant_steps(U, SxV, cfg.bits, us, ss);
   const uint64_t C = uint64_t(U.cols());
-  std::vector<float> deq;
-  auto coded_u = quant::encode("U." + name, {uint64_t(U.rows()), C}, U.data(), us, {}, 19, &deq);
-  if (!coded_u.ok()) return out.status = coded_u.status(), out.U = U, out.SxV = SxV, out;
-  out.U = Eigen::Map<MatrixXfR>(deq.data(), U.rows(), U.cols());
   quant::Layout L;
   if (cfg.dct) L.dct = true, L.width = uint32_t(width), L.height = uint32_t(height);
-  auto coded_s = quant::encode("SxV." + name, {uint64_t(SxV.rows()), C}, SxV.data(), ss, L, 19, &deq);
+  // The two tensors on two threads: each quant::encode is one single-threaded zstd (level 19)
+  // call, most of an encode's time after the SVD (30 % of a `--max-bytes` search's on the
+  // textile, perf), and the other core idled through it. Same bytes either way.
+  std::vector<float> deq_u, deq_s;
+  auto encode_s = [&] { return quant::encode("SxV." + name, {uint64_t(SxV.rows()), C}, SxV.data(), ss, L, 19, &deq_s); };
+  std::future<Result<Tensor>> pending;
+  try {
+    pending = std::async(std::launch::async, encode_s);
+  } catch (const std::system_error&) {  // no thread to be had: one after the other
+  }
+  auto coded_u = quant::encode("U." + name, {uint64_t(U.rows()), C}, U.data(), us, {}, 19, &deq_u);
+  auto coded_s = pending.valid() ? pending.get() : encode_s();
+  if (!coded_u.ok()) return out.status = coded_u.status(), out.U = U, out.SxV = SxV, out;
   if (!coded_s.ok()) return out.status = coded_s.status(), out.U = U, out.SxV = SxV, out;
-  out.SxV = Eigen::Map<MatrixXfR>(deq.data(), SxV.rows(), SxV.cols());
+  out.U = Eigen::Map<MatrixXfR>(deq_u.data(), U.rows(), U.cols());
+  out.SxV = Eigen::Map<MatrixXfR>(deq_s.data(), SxV.rows(), SxV.cols());
   out.coded.push_back(std::move(coded_u).value());
   out.coded.push_back(std::move(coded_s).value());
   return out;
