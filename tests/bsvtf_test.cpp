@@ -262,8 +262,8 @@ TEST(Bsvtf, DfmfWithItsOwnOffsetIsColourModel13) {
   double err = 0, err_bonn = 0, err_exact = 0, ref = 0;
   for (int y = 0; y < d.height; y += 7)
     for (int x = 0; x < d.width; x += 5)
-      for (int v = 0; v < d.num_views(); ++v)
-        for (int l = 0; l < d.num_lights(); ++l) {
+      for (int v = 0; v < int(d.num_views()); ++v)
+        for (int l = 0; l < int(d.num_lights()); ++l) {
           float want[3];
           m->eval(x, y, l, v, want);
           const size_t i = size_t(y) * size_t(d.width) + size_t(x), r = size_t(l) + size_t(d.num_lights()) * size_t(v);
