@@ -90,6 +90,12 @@ struct BsvtfReport {
   double seconds = 0;
 };
 
+struct FmfFactorsView;  // codecs/fmf/fmf.h
+// The colour model a factorization is written as: 0 (rgb), 11 (dfmf with Bonn's offset 1e-5),
+// 13 (dfmf with another offset), or -1 when BSVTF cannot hold it (a Bonn colour model other
+// than 0 and 11). write_bsvtf and the export's attach_bsvtf both decide by it.
+int bsvtf_color_model(const FmfFactorsView& f);
+
 // Writes the BSVTF of an fmf model. invalid_argument: not an fmf model, bad options;
 // unsupported: a Bonn colour model other than 0 (rgb) and 11 (dfmf; written as colour model 13
 // when its luminance offset is not 1e-5); io_error on write.

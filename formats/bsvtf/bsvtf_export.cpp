@@ -10,7 +10,7 @@ bool attach_bsvtf(gpu::ExportBundle& bundle, const Model& model, const gpu::Expo
                   BsvtfReport* report) {
   auto fv = fmf_factors(model);
   if (!fv.ok()) return false;
-  if (fv->bonn_color_model != (fv->per_channel ? 11 : 0)) {
+  if (bsvtf_color_model(*fv) < 0) {
     // A factorization read from a Bonn file in another colour model: its textures export, and
     // the export goes on without the streaming file rather than failing (write_bsvtf: unsupported).
     bundle.warnings.push_back("model.bsvtf not written: BSVTF stores FMF rgb and DFMF (Bonn colour models 0 and 11), this model's is " +

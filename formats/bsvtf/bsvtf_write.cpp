@@ -169,18 +169,23 @@ Status write_file(const std::string& path, const std::vector<uint8_t>& head, con
 
 }  // namespace
 
+int bsvtf_color_model(const FmfFactorsView& f) {
+  if (f.bonn_color_model != (f.per_channel ? 11 : 0)) return -1;
+  // A dfmf model with Bonn's offset is colour model 11 in a version 1.0 file, as before; with any
+  // other offset (btfc's default picks one from the data) colour model 13, which stores it: a
+  // 1.1 file that a 1.0 reader refuses by its colour model (bsvtf.h).
+  return f.per_channel ? (f.drr_eps == 1e-5f ? 11 : 13) : 0;
+}
+
 Status write_bsvtf(const Model& model, const BsvtfOptions& opt, const std::string& path, BsvtfReport* report) {
   const auto t0 = Clock::now();
   BTFC_ASSIGN_OR_RETURN(FmfFactorsView f, fmf_factors(model));
   const BtfDesc& desc = model.desc();
-  if (f.bonn_color_model != (f.per_channel ? 11 : 0))
+  const int color = bsvtf_color_model(f);
+  if (color < 0)
     return unsupported(path + ": the fmf model uses Bonn colour model " + std::to_string(f.bonn_color_model) +
                        "; BSVTF stores FMF rgb (model 0) and DFMF (model 11) models only");
-  // A dfmf model with Bonn's offset is colour model 11 in a version 1.0 file, as before; with any
-  // other offset (btfc's default picks one from the data) colour model 13, which stores it: a
-  // 1.1 file that a 1.0 reader refuses by its colour model (bsvtf.h).
-  const bool own_offset = f.per_channel && f.drr_eps != 1e-5f;
-  const int color = f.per_channel ? (own_offset ? 13 : 11) : 0;
+  const bool own_offset = color == 13;
   if (own_offset && !(std::isfinite(f.drr_eps) && f.drr_eps > 0))
     return invalid_argument(path + ": the dfmf model's luminance offset " + real_string(f.drr_eps) + " is not a positive number");
   if (opt.quality < 1 || opt.quality > 100) return invalid_argument(path + ": quality " + std::to_string(opt.quality) + " outside [1, 100]");
