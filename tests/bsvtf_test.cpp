@@ -282,8 +282,9 @@ TEST(Bsvtf, DfmfWithItsOwnOffsetIsColourModel13) {
   EXPECT_LE(std::sqrt(err / ref), 0.032);
   EXPECT_GE(std::sqrt(err / ref), 0.75 * 0.032);
   EXPECT_GT(std::sqrt(err_bonn / ref), 3 * std::sqrt(err / ref));  // 0.107 measured
-  // The tile cache reads model 13 and shades with its offset (the luminance of Y' U' V'): a
-  // small cache's run on the file completes with finite statistics.
+  // The tile cache reads model 13: a small cache's run on the file completes with finite
+  // statistics. (That it shades with the stored offset: tile_cache_test.cpp,
+  // ConvergedImageIsTheModelShadedWithTheFilesOffset.)
   auto sim = TileCacheSim::make(rd);
   ASSERT_TRUE(sim.ok()) << sim.status().message();
   TileCacheOptions o;

@@ -129,3 +129,66 @@ TEST(TileCache, RejectsBadOptions) {
   o.light = 99;
   EXPECT_FALSE(sim.run(o).ok());
 }
+
+TEST(TileCache, ConvergedImageIsTheModelShadedWithTheFilesOffset) {
+  // A dfmf material the same at every texel: every pixel of the converged image, whatever level
+  // and bilinear position it reads, shows the model's value at the shading (light, view), i.e.
+  // the luminance of Model::eval there. The file is colour model 13 (offset 0.5, from the data
+  // in a btfc encode): its Y' U' V' are shaded through that offset; Bonn's 1e-5 would put every
+  // pixel off by about 0.5 / Y (about a third here).
+  const int W = 96, H = 64;
+  const float offset = 0.5f;
+  const BtfDesc d = small_desc(W, H);
+  const size_t rows = d.num_images();  // 10: 5 lights x 2 views
+  // Per block: Y' U' V' = (a + b s_r) / sqrt(rows), s_r = +1 on even rows, -1 on odd ones (two
+  // orthonormal columns):
+  // Y + e in [1.5, 2.3], chroma a few hundredths.
+  const float ab[3][2] = {{2.0f, 0.6f}, {0.1f, 0.05f}, {-0.08f, 0.04f}};
+  std::vector<FmfFactors> blocks;
+  for (int b = 0; b < 3; ++b) {
+    FmfFactors f;
+    f.name = std::string(1, "yuv"[b]);
+    f.C = 2;
+    for (size_t r = 0; r < rows; ++r) f.U.push_back(float(1 / std::sqrt(double(rows)))), f.U.push_back(float((r % 2 ? -1 : 1) / std::sqrt(double(rows))));
+    for (int t = 0; t < W * H; ++t) f.SxV.push_back(ab[b][0]), f.SxV.push_back(ab[b][1]);
+    f.S.assign(2, 1.0f);
+    blocks.push_back(std::move(f));
+  }
+  auto m = make_fmf_model(d, 11, std::move(blocks), nullptr, nullptr, false, offset);
+  ASSERT_TRUE(m.ok()) << m.status().message();
+  const std::string p = tmp_path("uniform13.bsvtf");
+  BsvtfOptions bo;
+  bo.tile = 32;
+  ASSERT_TRUE(write_bsvtf(**m, bo, p, nullptr).ok());
+  auto rd = BsvtfReader::open(p);
+  ASSERT_TRUE(rd.ok()) << rd.status().message();
+  ASSERT_EQ(rd->color_model(), 13);
+  auto sim = TileCacheSim::make(*rd);
+  ASSERT_TRUE(sim.ok()) << sim.status().message();
+  double worst = 0, spread_lo = 1e30, spread_hi = 0;
+  for (auto [light, view] : {std::pair{-1, -1}, std::pair{3, 0}, std::pair{1, 1}}) {
+    TileCacheOptions o = options(8, 8);
+    o.light = light, o.view = view;
+    float rgb[3];
+    (*m)->eval(W / 3, H / 2, light >= 0 ? light : int(d.num_lights()) / 2, view >= 0 ? view : 0, rgb);
+    const double want = 0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2];
+    spread_lo = std::min(spread_lo, want), spread_hi = std::max(spread_hi, want);
+    for (int frame : {0, 4}) {
+      auto img = sim->converged_luminance(o, frame);
+      ASSERT_TRUE(img.ok()) << img.status().message();
+      ASSERT_EQ(img->size(), size_t(o.path.width) * size_t(o.path.height));
+      size_t hits = 0;
+      for (float v : *img)
+        if (!std::isnan(v)) ++hits, worst = std::max(worst, std::abs(v - want) / want);
+      EXPECT_GT(hits, img->size() / 10) << frame;
+    }
+  }
+  std::printf("converged luminance of a uniform colour model 13 file: worst rel. error %.3g (shadings %.3f..%.3f)\n", worst, spread_lo, spread_hi);
+  EXPECT_GT(spread_hi, 1.1 * spread_lo);  // the three shadings differ: light and view are honoured
+  // Half-float packets and one quantised DC per tile: 1e-3 relative at most.
+  EXPECT_LE(worst, 1e-3);
+  TileCacheOptions bad = options(8, 8);
+  bad.view = 2;
+  EXPECT_FALSE(sim->converged_luminance(bad, 0).ok());
+  EXPECT_FALSE(sim->converged_luminance(options(8, 8), 8).ok());  // past the path's frames
+}

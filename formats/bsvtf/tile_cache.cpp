@@ -64,6 +64,7 @@ struct CacheRunState {
   uint64_t bytes = 0, frame_bytes = 0;
   int frame = 0;
   TileCacheFrame stats;
+  std::vector<float> converged;  // measure()'s converged luminance image (0 where the ray misses)
 
   CacheRunState(const TileCacheSim& s, const TileCacheOptions& o) : sim(s), g(s.m_geo), opt(o), per(s.m_per_texture) {
     for (int l = 0; l < g.levels; ++l)
@@ -278,6 +279,7 @@ struct CacheRunState {
     stats.error = R > 0 ? std::sqrt(E / R) : std::sqrt(E);
     const float peak = *std::max_element(lum_ref.begin(), lum_ref.end());
     stats.ssim = ssim_gray(lum_ref.data(), lum_res.data(), W, H, peak > 0 ? peak : 1.0);
+    converged = std::move(lum_ref);
   }
   // Luminance of a shaded value: colour model 11 and 13 values are Y' U' V' (bsvtf.h).
   float luminance(float* v) const {
@@ -290,11 +292,29 @@ struct CacheRunState {
   }
 };
 
+namespace {
+Status check_shading(const TileCacheOptions& o, int lights, int views) {
+  if (o.light >= lights || o.view >= views)
+    return invalid_argument("tile cache: shading light " + std::to_string(o.light) + " / view " + std::to_string(o.view) + " outside the file's " +
+                            std::to_string(lights) + " lights x " + std::to_string(views) + " views");
+  return {};
+}
+}  // namespace
+
+Result<std::vector<float>> TileCacheSim::converged_luminance(const TileCacheOptions& o, int frame) const {
+  BTFC_RETURN_IF_ERROR(check_shading(o, m_lights, m_views));
+  BTFC_ASSIGN_OR_RETURN(std::vector<FeedbackPixel> fb, feedback_image(m_geo, o.path, frame));
+  CacheRunState st(*this, o);  // nothing resident: measure()'s reference side is all this needs
+  st.measure(fb);
+  std::vector<float> img = std::move(st.converged);
+  for (size_t i = 0; i < fb.size(); ++i)
+    if (!fb[i].hit) img[i] = std::numeric_limits<float>::quiet_NaN();
+  return img;
+}
+
 Result<TileCacheRun> TileCacheSim::run(const TileCacheOptions& o) const {
   if (o.cache_tiles < 1) return invalid_argument("tile cache: at least one tile slot is needed");
-  if (o.light >= m_lights || o.view >= m_views)
-    return invalid_argument("tile cache: shading light " + std::to_string(o.light) + " / view " + std::to_string(o.view) + " outside the file's " +
-                            std::to_string(m_lights) + " lights x " + std::to_string(m_views) + " views");
+  BTFC_RETURN_IF_ERROR(check_shading(o, m_lights, m_views));
   CacheRunState st(*this, o);
   st.send(m_header_bytes);
   TileCacheRun run;

@@ -90,7 +90,8 @@ struct FeedbackPixel {
   int level = 0;
   bool hit = false;
 };
-// The feedback image of `frame` (width x height, row-major); errors on bad options.
+// The feedback image of `frame` (0 .. path.frames - 1; width x height, row-major); errors on bad
+// options.
 Result<std::vector<FeedbackPixel>> feedback_image(const bsvtf::Geometry& g, const CameraPathOptions& path, int frame);
 
 class TileCacheSim {
@@ -98,6 +99,11 @@ class TileCacheSim {
   // Decodes every tile and packet of the file once (the simulator's "server").
   static Result<TileCacheSim> make(const BsvtfReader& file);
   Result<TileCacheRun> run(const TileCacheOptions& options) const;
+  // The converged image of `frame` on `options`' path (every needed tile at its level, every
+  // packet), shaded at `options`' light and view by the file's colour model (models 11 and 13:
+  // Y' U' V' through the file's luminance offset): the luminance each frame's SSIM compares
+  // against, row-major, NaN where the ray misses the sample. For tests and tools.
+  Result<std::vector<float>> converged_luminance(const TileCacheOptions& options, int frame) const;
 
   size_t textures() const { return m_textures; }
   size_t tiles() const { return m_textures * m_per_texture; }

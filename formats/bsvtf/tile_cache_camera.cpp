@@ -58,6 +58,8 @@ Result<std::vector<FeedbackPixel>> feedback_image(const bsvtf::Geometry& g, cons
   if (p.frames < 1 || p.width < 1 || p.height < 1 || p.width > 8192 || p.height > 8192)
     return invalid_argument("camera path: frames and screen size must be >= 1 (screen <= 8192)");
   if (!(p.fov_deg > 1 && p.fov_deg < 170)) return invalid_argument("camera path: field of view outside (1, 170) degrees");
+  if (frame < 0 || frame >= p.frames)
+    return invalid_argument("camera path: frame " + std::to_string(frame) + " outside the path's " + std::to_string(p.frames) + " frames");
   const double u = p.kind == CameraPathOptions::Kind::still ? 0.4 : p.frames == 1 ? 0.0 : double(frame) / (p.frames - 1);
   const Camera cam = camera_at(g, p, u);
   const int L = g.finest();
