@@ -235,6 +235,8 @@ MatrixXf gaussian(Index rows, Index cols, uint64_t seed) {
   return Om;
 }
 
+Status non_finite_input() { return corrupt_data("SVD input holds a non-finite value (NaN or infinity)"); }
+
 Result<SvdResult> power_svd(ConstMapF& B, const SvdOptions& opt) {
   const Index m = B.rows(), n = B.cols();
   const Index l = std::min<Index>(std::min(m, n), Index(opt.max_rank) + opt.oversample);
@@ -246,6 +248,7 @@ Result<SvdResult> power_svd(ConstMapF& B, const SvdOptions& opt) {
   r.method = "randomized";
   r.requested_rank = opt.max_rank;
   r.total_energy = frobenius2(B);
+  if (!std::isfinite(r.total_energy)) return non_finite_input();
   step();
 
   MatrixXf Y;
@@ -580,6 +583,7 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
     r.total_energy = 0;
     column_sketch_product(B.data(), size_t(m), size_t(n), sketch, Y, &r.total_energy);  // B Pi, and ||B||_F^2
   }
+  if (!std::isfinite(r.total_energy)) return non_finite_input();  // truncated_svd's contract (svd.h)
   step();
   int blocks = 0;
   Index g_cols = 0;  // columns of G filled
@@ -810,6 +814,8 @@ Result<SvdResult> truncated_svd(const float* B, size_t m, size_t n, const SvdOpt
   if (kept) return std::move(*kept);
   return randomized_svd(map, opt);
 }
+
+bool svd_checks_finite(size_t m, size_t n, const SvdOptions& opt) { return resolved_method(m, n, opt) == SvdMethod::randomized; }
 
 SvdMethod resolved_method(size_t m, size_t n, const SvdOptions& opt) {
   SvdMethod method = opt.method;

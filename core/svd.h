@@ -167,8 +167,16 @@ size_t column_sketch_sums_bytes(size_t m, size_t n, Eigen::Index l);
 // fraction of that).
 constexpr double k_krylov_stop = 2e-3;
 
-// B is column-major with leading dimension m. Fails on m == 0 or n == 0.
+// B is column-major with leading dimension m. Fails on m == 0 or n == 0. The randomized method
+// fails with corrupt_data when B holds a NaN or an infinity, found in its first pass before any
+// product: B's squared norm, summed there in double from every value, is finite exactly when
+// every value is (a float squared is at most 1.2e77). A caller may leave its own input check to
+// that pass (svd_checks_finite) and name the value after such a failure (Btf::check_finite).
+// (A call served from a kept factorization, RandomizedSvdReuse, runs no pass: it factorized the
+// same matrix before.) The exact method does not check.
 Result<SvdResult> truncated_svd(const float* B, size_t m, size_t n, const SvdOptions& opt);
+// Whether truncated_svd of an m x n matrix with `opt` runs the randomized method's check above.
+bool svd_checks_finite(size_t m, size_t n, const SvdOptions& opt);
 // The method truncated_svd runs for an m x n matrix: opt.method with automatic resolved (above),
 // and exact whenever rank + oversample reaches the small side.
 SvdMethod resolved_method(size_t m, size_t n, const SvdOptions& opt);

@@ -8,6 +8,7 @@
 
 #include "codecs/codec.h"
 #include "codecs/fmf/fmf.h"
+#include "core/svd.h"
 #include "core/interp.h"
 #include "tests/codec_test_util.h"
 
@@ -269,6 +270,49 @@ TEST(Fmf, NonFiniteInputIsAnError) {
         ASSERT_FALSE(m.ok()) << spec << " " << bad << " at " << at;
         EXPECT_NE(m.status().message().find("non-finite"), std::string::npos) << m.status().message();
       }
+  // A randomized rgb SVD checks in its first pass (no read of its own first): the same named
+  // error, wherever the value is; finite extremes pass. (The data's small side, 72 rows, is
+  // above rank + oversample: svd=randomized runs.)
+  const BtfDesc rd = make_desc(12, 10, 6, 4);
+  for (const char* spec : {"fmf:svd=randomized:rank=3:oversample=4", "fmf:svd=randomized:rank=3:oversample=4:power_iters=0"}) {
+    auto r = resolve_spec(spec);
+    ASSERT_TRUE(r.ok());
+    for (float bad : {NAN, INFINITY, -INFINITY})
+      for (size_t at : {size_t(0), size_t(777), size_t(12 * 10 * 72 - 1)}) {
+        Btf b = random_btf(rd, 2, 0.5, 0.0, 0.0, 9);
+        b.data()[at] = bad;
+        Context ctx;
+        auto m = r->first->encode(b, r->second, ctx);
+        ASSERT_FALSE(m.ok()) << spec << " " << bad << " at " << at;
+        EXPECT_EQ(m.status().code(), StatusCode::corrupt_data);
+        const size_t texel = at / 72;
+        const std::string where = "at texel (" + std::to_string(texel % 12) + ", " + std::to_string(texel / 12) + ")";
+        EXPECT_NE(m.status().message().find("non-finite value"), std::string::npos) << m.status().message();
+        EXPECT_NE(m.status().message().find(where), std::string::npos) << m.status().message();
+      }
+    Btf ok = random_btf(rd, 2, 0.5, 0.0, 0.0, 9);
+    ok.data()[5] = 3.4e38f, ok.data()[6] = -3.4e38f, ok.data()[7] = 1e-45f;
+    Context ctx;
+    EXPECT_TRUE(r->first->encode(ok, r->second, ctx).ok()) << spec;
+  }
+  // The SVD's contract (svd.h) on its own: randomized (block Krylov and power iterations) refuses
+  // a non-finite matrix; the exact method does not check.
+  {
+    std::vector<float> B(60 * 50, 0.25f);
+    for (size_t i = 0; i < B.size(); ++i) B[i] += float(i % 7) * 0.1f + float(i % 11) * 0.01f;
+    B[1234] = NAN;
+    SvdOptions o;
+    o.max_rank = 3, o.oversample = 4, o.method = SvdMethod::randomized;
+    EXPECT_TRUE(svd_checks_finite(60, 50, o));
+    for (RandomizedScheme sch : {RandomizedScheme::block_krylov, RandomizedScheme::power}) {
+      o.scheme = sch;
+      auto res = truncated_svd(B.data(), 60, 50, o);
+      ASSERT_FALSE(res.ok());
+      EXPECT_EQ(res.status().code(), StatusCode::corrupt_data);
+    }
+    o.method = SvdMethod::exact;
+    EXPECT_FALSE(svd_checks_finite(60, 50, o));
+  }
   // The flag the dfmf check rides on: set by a NaN or inf value, not by finite extremes.
   const float big = 3.4e38f, tiny = 1e-38f, vals[2][6] = {{big, big, big, tiny, 0.f, -big}, {1.f, NAN, 1.f, 1.f, 1.f, 1.f}};
   double sy = 0, sy2 = 0;
