@@ -235,9 +235,7 @@ int main(int argc, char** argv) {
     // The matrices the dfmf encode factorizes (fmf.cpp): the automatic offset, then each channel
     // through dfmf_channel, texel by texel (num_images rows x texels, column-major).
     const size_t rows = d.num_images(), n = d.num_texels();
-    double sy = 0, sy2 = 0;
-    for (size_t t = 0; t < n; ++t) dfmf_luminance_moments(btf->abrdf(t), rows, &sy, &sy2);
-    const float offset = float(dfmf_auto_offset(sy, sy2));
+    const float offset = float(dfmf_auto_offset(*btf));
     std::vector<float> col(rows);
     for (int k = 0; k < 3; ++k) {
       const std::string path = dump_dfmf + "." + "yuv"[k] + ".f32";

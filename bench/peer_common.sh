@@ -38,7 +38,7 @@ if grep -q avx512vl /proc/cpuinfo && [ -z "${OPENBLAS_CORETYPE:-}" ]; then expor
 # out-of-core and MPI paths a user runs rather than bench_fmf's streamed SVD over memory: WHO ooc
 # is `btfc compress FILE -c SPEC --max-memory 1G` (the raw .btfc streamed in place), WHO mpi is
 # btfc-mpi on 2 ranks with one core each (each maps its own chunks). Prints "SECONDS PEAK_GB
-# NAME=VALUE..." : the factorization's time (the streamed passes, color=dfmf's offset sweep
+# NAME=VALUE..." : the factorization's time (the streamed passes, color=dfmf's automatic offset
 # included), the peak RSS (per rank for mpi) and the model's encode stats.
 cli_run() {
   mkdir -p "$WORKDIR"

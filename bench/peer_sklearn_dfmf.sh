@@ -20,7 +20,7 @@
 #            --seed 1 -o FILE`): the command line's out-of-core encode (`btfc compress FILE -c
 #            fmf:rank=R:color=dfmf:power_iters=1:oversample=P --max-memory 1G`, the raw .btfc
 #            streamed in place; p 16 and 8) and btfc-mpi's on 2 ranks of one core each (p 16):
-#            the factorization's time with the offset sweep, peak RSS over the RGB input (per rank)
+#            the factorization's time with the automatic offset, peak RSS over the RGB input (per rank)
 # Errors are sqrt(||B||^2 - sum s_i^2) / ||B|| per channel (orthogonal projections: exact). A
 # run is at "equal error" when each of its three channel errors is within 1 % of the lowest any
 # run reached on that channel; the summary gives the ratio of the fastest such btfc run to the

@@ -100,7 +100,7 @@ class MatrixChunks final : public ChunkSource {
 // How many threads a source's first-sight checks of a chunk (a raw .btfc's CRC and finite test
 // in map() or load()) may use on the calling thread: 1 unless a scope on this thread raised it.
 // The streamed passes map on a helper thread while the GEMMs hold every core, where a second
-// team only competes with them; a sweep that only reads (color=dfmf's offset moments, the first
+// team only competes with them; a sweep that only reads (color=dfmf's automatic offset, the first
 // sight of every chunk there) raises it for its own thread, whose cores are otherwise idle.
 class CheckThreads {
  public:

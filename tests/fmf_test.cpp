@@ -258,7 +258,7 @@ TEST(Fmf, DfmfAutoOffsetScalesWithTheData) {
 }
 
 TEST(Fmf, NonFiniteInputIsAnError) {
-  // color=dfmf with the automatic offset checks on its moments pass (fmf.cpp), the others first.
+  // Every variant checks its input first (fmf.cpp), color=dfmf's automatic offset too.
   for (const char* spec : {"fmf", "fmf:color=dfmf", "fmf:color=dfmf:offset=0.5"})
     for (float bad : {NAN, INFINITY, -INFINITY})
       for (size_t at : {size_t(0), size_t(17), size_t(4 * 4 * 2 * 2 * 3 - 1)}) {
@@ -294,6 +294,32 @@ TEST(Fmf, NonFiniteInputIsAnError) {
     ok.data()[5] = 3.4e38f, ok.data()[6] = -3.4e38f, ok.data()[7] = 1e-45f;
     Context ctx;
     EXPECT_TRUE(r->first->encode(ok, r->second, ctx).ok()) << spec;
+  }
+  // color=dfmf streamed (its randomized channel SVDs check in their first pass, ooc_svd.h): NaN
+  // and +-inf in each colour channel, the value named when the input is kept, its texel when
+  // the encode converted the input in place (Context::consumable).
+  for (const char* spec : {"fmf:color=dfmf:svd=randomized:rank=3:chroma_rank=2:oversample=4",
+                           "fmf:color=dfmf:svd=randomized:rank=3:chroma_rank=2:oversample=4:offset=0.5"}) {
+    auto r = resolve_spec(spec);
+    ASSERT_TRUE(r.ok());
+    for (float bad : {NAN, INFINITY, -INFINITY})
+      for (size_t at : {size_t(0), size_t(778), size_t(12 * 10 * 72 - 1)})
+        for (bool consume : {false, true}) {
+          Btf b = random_btf(rd, 2, 0.5, 0.0, 1.0, 9);
+          b.data()[at] = bad;
+          Context ctx;
+          if (consume) ctx.consumable = &b;
+          auto m = r->first->encode(b, r->second, ctx);
+          ASSERT_FALSE(m.ok()) << spec << " " << bad << " at " << at;
+          EXPECT_EQ(m.status().code(), StatusCode::corrupt_data);
+          const size_t texel = at / 72;
+          const std::string where = "at texel (" + std::to_string(texel % 12) + ", " + std::to_string(texel / 12) + ")";
+          EXPECT_NE(m.status().message().find("fmf input: non-finite value"), std::string::npos) << m.status().message();
+          EXPECT_NE(m.status().message().find(where), std::string::npos) << consume << ": " << m.status().message();
+          if (!consume) {
+            EXPECT_NE(m.status().message().find(", channel " + std::to_string(at % 3)), std::string::npos) << m.status().message();
+          }
+        }
   }
   // The SVD's contract (svd.h) on its own: randomized (block Krylov and power iterations) refuses
   // a non-finite matrix; the exact method does not check.

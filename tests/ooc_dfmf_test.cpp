@@ -114,6 +114,50 @@ TEST(StreamingDfmf, MatchesInCoreDfmfFromCopiedAndMappedChunks) {
   }
 }
 
+TEST(StreamingDfmf, AutoOffsetIsTheSampleTexelsOnEveryPath) {
+  // More texels than the sample: the automatic offset is sum Y^2 / sum Y over 4096 evenly spaced
+  // texels, with the same bits in core, streamed (mapped or loaded chunks), and on one or three
+  // processes.
+  const std::vector<size_t> few = dfmf_offset_sample(100);
+  ASSERT_EQ(few.size(), 100u);
+  for (size_t i = 0; i < few.size(); ++i) EXPECT_EQ(few[i], i);
+  const Btf b = synth(75, 60);  // 4500 texels x 486 rows
+  const size_t n = b.desc().num_texels(), rows = b.desc().num_images();
+  const std::vector<size_t> s = dfmf_offset_sample(n);
+  ASSERT_EQ(s.size(), 4096u);
+  EXPECT_EQ(s.front(), 0u);
+  EXPECT_EQ(s.back(), 4095 * n / 4096);
+  for (size_t i = 1; i < s.size(); ++i) ASSERT_LT(s[i - 1], s[i]);
+  // The definition, with the portable kernel; and over every texel, which the sample estimates.
+  double sy = 0, sy2 = 0, ay = 0, ay2 = 0;
+  for (size_t t : s) dfmf_luminance_moments_reference(b.abrdf(t), rows, &sy, &sy2);
+  for (size_t t = 0; t < n; ++t) dfmf_luminance_moments_reference(b.abrdf(t), rows, &ay, &ay2);
+  const double e = dfmf_auto_offset(b), want = sy2 / sy, all = ay2 / ay;
+  std::printf("offset: sample %.9g, all texels %.9g\n", e, all);
+  EXPECT_NEAR(e, want, 1e-12 * want);  // the kernels add in another order
+  EXPECT_LT(std::fabs(e - all) / all, 0.01);
+  EXPECT_NE(e, all);  // a sample, not every texel
+  for (bool mapped : {false, true}) {
+    MemorySource src(b, 700);  // 7 chunks, the last one short
+    src.mapped = mapped;
+    for (int P : {1, 3}) {
+      std::vector<double> got(size_t(P), -1.0);
+      run_group(P, [&](Collective& me, int r) {
+        auto o = DfmfChannelSource::auto_offset(src, owned_chunks(src, r, P), me);
+        if (o.ok()) got[size_t(r)] = *o;
+      });
+      for (double g : got) EXPECT_EQ(g, e) << "mapped " << mapped << ", " << P << " processes";
+    }
+  }
+  // The in-core encode uses that offset.
+  auto spec = resolve_spec("fmf:color=dfmf:rank=2:chroma_rank=1:svd=randomized:oversample=2:power_iters=0");
+  ASSERT_TRUE(spec.ok());
+  Context ctx;
+  auto m = spec->first->encode(b, spec->second, ctx);
+  ASSERT_TRUE(m.ok()) << m.status().message();
+  EXPECT_NEAR(stat(*m.value(), "dfmf_offset"), e, 1e-5 * e);  // the spec keeps 6 digits; all texels: 1.6e-3 off
+}
+
 // The vectorized transform (dfmf_channels: a polynomial log) against the definition in double:
 // Y' = log(max(Y, 0) + e), U' = U / (max(Y, 0) + e), V' likewise; over HDR values 1e-6..1e6,
 // negatives, zeros, and sums that are not normal floats (a denormal offset, inf, NaN), which

@@ -32,7 +32,7 @@ const ParamSpec k_params[] = {
      "storage of U and SxV: half / float, or q = per-component quantized integers, zstd-coded (fmf_quant.h)"},
     {"bits", ParamSpec::Type::integer, "8", 2, 20, {}, "precision=q: step = 2^-bits x RMS of the strongest eigen-texture (SxV column; per at least rows / 16 texels), U column k's step / sigma_k (equal error per component)"},
     {"textures", ParamSpec::Type::choice, "plain", 0, 0, {"plain", "dct"}, "precision=q: SxV columns coded as integers (plain) or as 8x8 DCT coefficients of the eigen-texture images (dct)"},
-    {"offset", ParamSpec::Type::real, "0", 0, 1e30, {}, "color=dfmf: luminance offset e of Y' = log(Y + e), U' = U / (Y + e); 0 = from the data (sum Y^2 / sum Y); 1e-5 = Bonn's colour model 11 exactly"},
+    {"offset", ParamSpec::Type::real, "0", 0, 1e30, {}, "color=dfmf: luminance offset e of Y' = log(Y + e), U' = U / (Y + e); 0 = from the data (sum Y^2 / sum Y over up to 4096 evenly spaced texels); 1e-5 = Bonn's colour model 11 exactly"},
 };
 
 std::span<const ParamSpec> params_table() { return k_params; }
@@ -143,13 +143,15 @@ class FmfCodec final : public Codec {
     const std::string m = p.get("svd");
     opt.method = m == "exact" ? SvdMethod::exact : m == "randomized" ? SvdMethod::randomized : SvdMethod::automatic;
     const int rank = int(p.get_int("rank")), chroma = int(p.get_int("chroma_rank"));
-    // The input check: color=dfmf's automatic offset reads every value anyway and rides on that
-    // pass; a randomized rgb SVD checks in its first pass (truncated_svd's contract, svd.h): one
-    // read of the BTF fewer, 0.15 s of a 1.7 s UBO2003-size encode. Anything else checks first.
+    // The input check: a randomized SVD's first pass sums every value's square in double, which
+    // is finite exactly when every value is (truncated_svd's and streaming_svds' contract, svd.h,
+    // ooc_svd.h): the randomized paths leave it to that pass and name the value after a failure;
+    // one read of the BTF fewer (~0.15 s of a 1.7 s rgb or 2.6 s dfmf UBO2003-size encode). The
+    // exact paths check first.
     SvdOptions rgb_opt = opt;
     rgb_opt.max_rank = rank;
     const bool svd_checks = !cfg.dfmf && svd_checks_finite(d.abrdf_size(), d.num_texels(), rgb_opt);
-    if (!auto_offset && !svd_checks) BTFC_RETURN_IF_ERROR(btf.check_finite("fmf input"));
+    if (!cfg.dfmf && !svd_checks) BTFC_RETURN_IF_ERROR(btf.check_finite("fmf input"));
 
     std::vector<Block> blocks;
     ModelStats stats;
@@ -173,18 +175,6 @@ class FmfCodec final : public Codec {
       BTFC_RETURN_IF_ERROR(s);
     } else {
       const size_t rows = d.num_images(), n = d.num_texels();
-      double e = p.get_real("offset");
-      if (auto_offset) {
-        double sy = 0, sy2 = 0;
-        int bad = 0;
-#pragma omp parallel for reduction(+ : sy, sy2) reduction(| : bad) schedule(static)
-        for (size_t t = 0; t < n; ++t) bad |= int(dfmf_luminance_moments(btf.abrdf(t), rows, &sy, &sy2));
-        if (bad) BTFC_RETURN_IF_ERROR(btf.check_finite("fmf input"));  // names the value (or finds none: an overflowed sum)
-        e = dfmf_auto_offset(sy, sy2);
-      }
-      BTFC_ASSIGN_OR_RETURN(rp, dfmf_with_offset(p, e));
-      const float offset = config_from(rp).offset;
-      stats.add("dfmf_offset", offset);
       static const char* names[3] = {"y", "u", "v"};
       const int ranks[3] = {rank, chroma ? chroma : rank, chroma ? chroma : rank};
       SvdOptions oc[3] = {opt, opt, opt};
@@ -194,6 +184,14 @@ class FmfCodec final : public Codec {
         if (dfmf_target) oc[k].target_rel_error = 0;
         streamed = streamed && resolved_method(rows, n, oc[k]) == SvdMethod::randomized;
       }
+      if (!streamed) BTFC_RETURN_IF_ERROR(btf.check_finite("fmf input"));
+      // The automatic offset from a sample of the texels (fmf.h): a non-finite value there makes
+      // it the fallback, and the first pass then fails on it.
+      double e = p.get_real("offset");
+      if (auto_offset) e = dfmf_auto_offset(btf);
+      BTFC_ASSIGN_OR_RETURN(rp, dfmf_with_offset(p, e));
+      const float offset = config_from(rp).offset;
+      stats.add("dfmf_offset", offset);
       size_t clamped = 0;
       if (streamed) {
         // Randomized: the three channel matrices in one stream over the Btf's own memory
@@ -209,8 +207,17 @@ class FmfCodec final : public Codec {
         float* const scratch = ctx.consumable == &btf && !dfmf_target ? ctx.consumable->data() : nullptr;
         Collective one;
         double cl = 0;
-        BTFC_ASSIGN_OR_RETURN(std::vector<SvdResult> rs,
-                              dfmf_streaming_svds(src, owned_chunks(src, 0, 1), offset, oc[0], oc[1], one, nullptr, 0, &cl, scratch));
+        auto r = dfmf_streaming_svds(src, owned_chunks(src, 0, 1), offset, oc[0], oc[1], one, nullptr, 0, &cl, scratch);
+        if (!r.ok() && r.status().code() == StatusCode::corrupt_data) {
+          // A non-finite value (ooc_svd.h): named where the input is intact, else (converted in
+          // place in the first pass) its texel.
+          if (!scratch) BTFC_RETURN_IF_ERROR(btf.check_finite("fmf input"));
+          const size_t i = find_non_finite(btf.data(), btf.size());
+          if (i < btf.size())
+            return corrupt_data("fmf input: non-finite value at texel (" + std::to_string(i / d.abrdf_size() % size_t(d.width)) + ", " +
+                                std::to_string(i / d.abrdf_size() / size_t(d.width)) + ")");
+        }
+        BTFC_ASSIGN_OR_RETURN(std::vector<SvdResult> rs, std::move(r));
         for (int k = 0; k < 3; ++k) blocks.push_back(block_from_svd(names[k], std::move(rs[k]), cfg.half, ranks[k], 0, stats));
         clamped = size_t(cl);
       } else {

@@ -23,8 +23,9 @@
 //          (docs/benchmarks.md, "dfmf on HDR data"). A factorization error d of Y' or U' costs
 //          (Y + e) d in the data, so e sets where the model is relative (Y >> e, log-like) and
 //          where absolute (Y << e). The default e = sum Y^2 / sum Y (the energy-weighted mean
-//          luminance) puts the bright values that hold the L2 energy on the absolute side; it
-//          scales with the data (a BTF times s gives the same model, offset times s). The model's
+//          luminance, over a sample of up to 4096 evenly spaced texels: dfmf_offset_sample)
+//          puts the bright values that hold the L2 energy on the absolute side; it scales with
+//          the data (a BTF times s gives the same model, offset times s). The model's
 //          spec holds the resolved e. Only e = 1e-5 is Bonn's colour model 11 exactly: the Bonn
 //          DFMF writer and the OpenCL kernels take those models only (other offsets decode on
 //          the CPU path; write them as .btfc).
@@ -131,14 +132,24 @@ size_t dfmf_channel(const float* abrdf, size_t rows, int k, float offset, float*
 // itself for sums that are not normal finite floats).
 size_t dfmf_channels(const float* abrdf, size_t rows, float offset, float* y, float* u, float* v);
 // The automatic offset (offset=0): adds one texel's sum of Y and of Y^2 (Y clamped to >= 0) to
-// *sum_y, *sum_y2; dfmf_auto_offset turns the BTF's sums into e = sum Y^2 / sum Y (Bonn's 1e-5
-// when there is no luminance; at least the smallest normal float). The streamed encode sums the
-// same way over its chunks. Returns true when a luminance was NaN or inf: whenever a value is
-// (Btf::check_finite then names it: the in-core encode's input check rides on this pass), and for
-// finite values only if their weighted sum rounds past the largest float (the Y weights are
-// positive and sum to 1).
+// *sum_y, *sum_y2; dfmf_auto_offset turns sums into e = sum Y^2 / sum Y (Bonn's 1e-5 when there
+// is no luminance; at least the smallest normal float). Returns true when a luminance was NaN or
+// inf: whenever a value is, and for finite values only if their weighted sum rounds past the
+// largest float (the Y weights are positive and sum to 1).
 bool dfmf_luminance_moments(const float* abrdf, size_t rows, double* sum_y, double* sum_y2);
 double dfmf_auto_offset(double sum_y, double sum_y2);
+// The texels the automatic offset is taken from: m = min(texels, 4096) evenly spaced ones,
+// texel i x texels / m (integer division) for i < m, increasing. e is a scale (the data's
+// energy-weighted mean luminance), which a few thousand texels give to a fraction of a percent;
+// summing every texel cost a read of the whole BTF before the first pass (out of core: of the
+// whole file, 0.6-1.6 s of a 3.7-4.7 s UBO2003-size encode).
+std::vector<size_t> dfmf_offset_sample(size_t texels);
+// e from the sample's sums: sums[2 i], sums[2 i + 1] = sample texel i's sum Y and sum Y^2, each
+// from zero (dfmf_luminance_moments), added in sample order. Every encode path (in core, out of
+// core, any number of MPI processes) fills the same table this way, so all pick the same bits.
+double dfmf_offset_from_sample(const std::vector<double>& sums);
+// The automatic offset of an in-memory BTF of 3 channels (the in-core encode's).
+double dfmf_auto_offset(const Btf& btf);
 // The portable builds of the two loops above, which this CPU's kernels (AVX2 or AVX-512) are
 // tested against: dfmf_channels returns their bits, dfmf_luminance_moments their sums to
 // rounding (its lanes add in another order).

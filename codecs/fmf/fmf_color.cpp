@@ -545,6 +545,30 @@ double dfmf_auto_offset(double sum_y, double sum_y2) {
   return std::isfinite(e) && e > 0 ? std::max(e, double(std::numeric_limits<float>::min())) : k_drr_eps;
 }
 
+std::vector<size_t> dfmf_offset_sample(size_t texels) {
+  const size_t m = std::min<size_t>(texels, 4096);
+  std::vector<size_t> t(m);
+  for (size_t i = 0; i < m; ++i) t[i] = size_t((unsigned __int128)i * texels / m);  // no overflow at any size
+  return t;
+}
+
+double dfmf_offset_from_sample(const std::vector<double>& sums) {
+  double sy = 0, sy2 = 0;
+  for (size_t i = 0; i + 1 < sums.size(); i += 2) sy += sums[i], sy2 += sums[i + 1];
+  return dfmf_auto_offset(sy, sy2);
+}
+
+double dfmf_auto_offset(const Btf& btf) {
+  const std::vector<size_t> sample = dfmf_offset_sample(btf.desc().num_texels());
+  std::vector<double> sums(2 * sample.size(), 0.0);
+  const size_t rows = btf.desc().num_images();
+  // Each texel's sums from zero into its own slots: the same bits on any thread count.
+#pragma omp parallel for schedule(static)
+  for (long long i = 0; i < (long long)sample.size(); ++i)
+    dfmf_luminance_moments(btf.abrdf(sample[size_t(i)]), rows, &sums[2 * size_t(i)], &sums[2 * size_t(i) + 1]);
+  return dfmf_offset_from_sample(sums);
+}
+
 Result<Params> dfmf_with_offset(const Params& p, double offset) {
   char buf[64];
   std::snprintf(buf, sizeof buf, "%.9g", offset);

@@ -1,6 +1,7 @@
 // dfmf channel chunk sources; see ooc_dfmf.h.
 #include "codecs/fmf/ooc_dfmf.h"
 
+#include <algorithm>
 #include <cstring>
 #include <omp.h>
 #include <vector>
@@ -51,20 +52,25 @@ Status DfmfChannelSource::load(size_t c, void* raw, float* dst) const {
   return transform(c, scratch, dst);
 }
 
-Status DfmfChannelSource::luminance_moments(const ChunkSource& base, const std::vector<size_t>& chunks, Collective& coll,
-                                            double* sum_y, double* sum_y2) {
+Result<double> DfmfChannelSource::auto_offset(const ChunkSource& base, const std::vector<size_t>& chunks, Collective& coll) {
   const size_t in_rows = base.rows();
-  double sums[2] = {0, 0};
+  const std::vector<size_t> sample = dfmf_offset_sample(base.texels());
+  // Per sample texel its two sums. Each process fills the slots of the texels in its chunks; the
+  // others' stay 0, so the sum over the processes is exact and every process adds the same table
+  // in the same order.
+  std::vector<double> sums(2 * sample.size(), 0.0);
   Status local;
   if (in_rows % 3 != 0) local = invalid_argument("color=dfmf needs 3 channels: the BTF matrix has " + std::to_string(in_rows) + " rows");
   std::vector<float> values;
   std::vector<uint8_t> raw;
   // The first sight of every chunk: the source's checks (a raw .btfc's CRC and finite test) on
   // all threads, nothing else runs meanwhile (2.5-3.1 -> 1.6-1.8 s on the UBO2003-size BTF in one
-  // run on a slow stretch of the host; docs/benchmarks.md).
+  // run on a slow stretch of the host; docs/benchmarks.md). Leaving them to the first pass and
+  // reading only the sample was no faster with the file cached and slower from disk (the pass's
+  // reader thread checks alone; docs/benchmarks.md, fifteenth session of 2026-12-06).
   const CheckThreads wide(omp_get_max_threads());
-  for (size_t i = 0; i < chunks.size() && local.ok(); ++i) {
-    const size_t c = chunks[i], count = base.chunk_count(c);
+  for (size_t ci = 0; ci < chunks.size() && local.ok(); ++ci) {
+    const size_t c = chunks[ci], first = base.chunk_first(c);
     const float* b = nullptr;
     if (base.mappable()) {
       auto m = base.map(c);
@@ -74,23 +80,24 @@ Status DfmfChannelSource::luminance_moments(const ChunkSource& base, const std::
       }
       b = m.value();
     } else {
-      values.resize(in_rows * count);
+      values.resize(in_rows * base.chunk_count(c));
       raw.resize(base.raw_buffer_bytes(c));
       local = base.load(c, raw.empty() ? nullptr : raw.data(), values.data());
       if (!local.ok()) break;
       b = values.data();
     }
-    double sy = 0, sy2 = 0;  // in parallel: serial, this pass took 5.3 s of a 17.6 s UBO2003-size encode
-#pragma omp parallel for reduction(+ : sy, sy2) schedule(static)
-    for (long long t = 0; t < (long long)count; ++t) dfmf_luminance_moments(b + size_t(t) * in_rows, in_rows / 3, &sy, &sy2);
-    sums[0] += sy, sums[1] += sy2;
+    // The sample texels in this chunk: [lo, hi).
+    const size_t lo = size_t(std::lower_bound(sample.begin(), sample.end(), first) - sample.begin()),
+                 hi = size_t(std::lower_bound(sample.begin(), sample.end(), first + base.chunk_count(c)) - sample.begin());
+#pragma omp parallel for schedule(static)
+    for (long long i = (long long)lo; i < (long long)hi; ++i)
+      dfmf_luminance_moments(b + (sample[size_t(i)] - first) * in_rows, in_rows / 3, &sums[2 * size_t(i)], &sums[2 * size_t(i) + 1]);
     if (base.mappable()) base.unmap(c, b);
   }
   // Every process joins the sum, then all agree on the first failure (no process waits alone).
-  BTFC_RETURN_IF_ERROR(coll.allreduce_sum(sums, 2));
+  BTFC_RETURN_IF_ERROR(coll.allreduce_sum(sums.data(), sums.size()));
   BTFC_RETURN_IF_ERROR(coll.agree(local));
-  *sum_y = sums[0], *sum_y2 = sums[1];
-  return {};
+  return dfmf_offset_from_sample(sums);
 }
 
 uint64_t DfmfChannelSource::clamped() const {

@@ -45,10 +45,11 @@ class DfmfChannelSource final : public ChunkSource {
   // often it was loaded (channel 0 only counts; the other channels clamp the same values).
   uint64_t clamped() const;
 
-  // The automatic offset's sums (dfmf_luminance_moments, fmf.h) over `chunks` of `base`, summed
-  // over the processes of `coll`: one extra pass before the factorizations (offset=0 only).
-  static Status luminance_moments(const ChunkSource& base, const std::vector<size_t>& chunks, Collective& coll,
-                                  double* sum_y, double* sum_y2);
+  // The automatic offset (offset=0; dfmf_offset_sample, fmf.h) of `base`: the sums of the
+  // sample texels in `chunks`, joined over the processes of `coll` (every process gets the same
+  // e, the in-core encode's bits), in one sweep of the chunks before the factorizations, which
+  // is also their first sight (the base's checks, which name a non-finite value).
+  static Result<double> auto_offset(const ChunkSource& base, const std::vector<size_t>& chunks, Collective& coll);
 
  private:
   Status transform(size_t c, const float* base_chunk, float* dst) const;

@@ -155,9 +155,7 @@ Result<StreamedEncode> encode_fmf_streamed(const ChunkSource& src, const BtfDesc
     double e = p.get_real("offset");
     if (e <= 0) {
       const auto t0 = std::chrono::steady_clock::now();
-      double sy = 0, sy2 = 0;
-      BTFC_RETURN_IF_ERROR(DfmfChannelSource::luminance_moments(src, out.chunks, coll, &sy, &sy2));
-      e = dfmf_auto_offset(sy, sy2);
+      BTFC_ASSIGN_OR_RETURN(e, DfmfChannelSource::auto_offset(src, out.chunks, coll));
       offset_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     }
     BTFC_ASSIGN_OR_RETURN(rp, dfmf_with_offset(p, e));

@@ -36,6 +36,9 @@ class Krylov {
   }
   int max_passes() const { return m_max_blocks + 1; }  // at most: the error-driven stop may end earlier
   Phase phase() const { return m_phase; }
+  // After the first pass, before end(): whether the matrix's squared norm in the global sums is
+  // finite, i.e. every value is (streaming_svds' input check, ooc_svd.h).
+  bool finite_energy(const double* sums) const { return m_phase != Phase::sketch || std::isfinite(sums[m_m * size_t(m_l)]); }
   // The sparse sketch this pass sums (W += B S over the chunks, Y = W G once), else null.
   const Sketch* summed_sketch() const {
     return m_phase == Phase::sketch && m_sketch.sparse() && m_opt.sketch_sums ? &m_sketch : nullptr;
@@ -329,6 +332,10 @@ Result<std::vector<SvdResult>> streaming_svds(const ChunkSource& src, const std:
       if (first && stacked) std::vector<float>().swap(stacked_w);
     };
     BTFC_RETURN_IF_ERROR(run.pass(payload, fn, pack));
+    // The input check (ooc_svd.h): every process sees the same sums, so all return here alike.
+    for (size_t a = 0; a < active.size(); ++a)
+      if (!ks[active[a]].finite_energy(run.sums().data() + off[a]))
+        return corrupt_data("streamed SVD input: matrix " + std::to_string(active[a]) + " holds a non-finite value (NaN or infinity)");
     // The steps between passes (orthonormalisation, the stopping test) are each factorization's
     // own: color=dfmf's three on both threads (on one, they left the other idle for 3 % of an
     // encode at UBO2003 size; docs/benchmarks.md). The same bits in any order.

@@ -97,7 +97,10 @@ struct ChunkSplit {
 // unfinished factorization's products on each part. Each result is streaming_svd's on that
 // matrix (its own error-driven stop; the stream ends with the last). The parts take at most a
 // chunk's values in floats besides streaming_svd's memory for each matrix. With split null, the
-// source itself is the one matrix (streaming_svd).
+// source itself is the one matrix (streaming_svd). A matrix holding a NaN or an infinity fails
+// with corrupt_data after the first pass, on every process, before any product of a later pass:
+// its squared norm, summed in double from every value there, is finite exactly when every value
+// is (a source's own checks, e.g. a raw .btfc's, name such a value in that pass before).
 Result<std::vector<SvdResult>> streaming_svds(const ChunkSource& src, const std::vector<size_t>& chunks, const ChunkSplit* split,
                                               const std::vector<SvdOptions>& opts, Collective& coll, StreamStats* stats = nullptr,
                                               int kept_blocks = 0);

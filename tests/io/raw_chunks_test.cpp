@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -13,6 +14,9 @@
 #include <thread>
 #include <vector>
 
+#include "codecs/codec.h"
+#include "codecs/fmf/fmf.h"
+#include "codecs/fmf/ooc_fmf.h"
 #include "codecs/fmf/ooc_svd.h"
 #include "core/synth.h"
 #include "formats/btf_io.h"
@@ -224,4 +228,56 @@ TEST(RawChunks, ChecksOnSeveralThreadsJoinTheCrcAndFindTheFirstNaN) {
     EXPECT_NE(s.message().find("CRC mismatch"), std::string::npos) << t << ": " << s.message();
   }
   std::remove(path.c_str());
+}
+
+// color=dfmf's automatic offset out of core, from its sample of texels in the sweep that first
+// sees (and checks) every chunk: the same offset as in core, and a NaN is an error naming the
+// file and texel whether it lies in a sampled texel or in one the sample skips.
+TEST(RawChunks, DfmfAutoOffsetReadsItsSampleAndNaNIsStillNamed) {
+  Btf b = synth(70, 60);  // 4200 texels: 104 of them outside the offset's sample of 4096
+  const std::vector<size_t> s = dfmf_offset_sample(b.desc().num_texels());
+  size_t unsampled = 0;
+  while (std::binary_search(s.begin(), s.end(), unsampled)) ++unsampled;
+  const size_t sampled = s[2000];
+  auto spec = resolve_spec("fmf:color=dfmf:rank=4:chroma_rank=2:oversample=4:power_iters=1:svd=randomized");
+  ASSERT_TRUE(spec.ok());
+  auto offset_of = [](const Model& m) {
+    for (const auto& [k, v] : m.stats().numbers)
+      if (k == "dfmf_offset") return v;
+    return -1.0;
+  };
+  {
+    const std::string path = tmp_path("dfmf_clean.btfc");
+    ASSERT_TRUE(write_btf(b, path).ok());
+    auto src = open_raw_chunks(path, 7);
+    ASSERT_TRUE(src.ok()) << src.status().message();
+    Context ctx;
+    Collective one;
+    auto st = encode_fmf_streamed(*src.value(), b.desc(), spec->second, ctx, one);
+    ASSERT_TRUE(st.ok()) << st.status().message();
+    auto in_core = spec->first->encode(b, spec->second, ctx);
+    ASSERT_TRUE(in_core.ok()) << in_core.status().message();
+    EXPECT_EQ(offset_of(*st->model), offset_of(*in_core.value()));
+    EXPECT_GT(offset_of(*st->model), 0);
+    std::remove(path.c_str());
+  }
+  const float marker = 0.123456789f;
+  for (size_t texel : {sampled, unsampled}) {
+    Btf bad = b;
+    bad.abrdf(texel)[5] = marker;
+    const std::string path = tmp_path("dfmf_nan.btfc");
+    ASSERT_TRUE(write_btf(bad, path).ok());
+    patch_float(path, marker, std::numeric_limits<float>::quiet_NaN());
+    auto src = open_raw_chunks(path, 7);
+    ASSERT_TRUE(src.ok()) << src.status().message();
+    Context ctx;
+    Collective one;
+    auto st = encode_fmf_streamed(*src.value(), b.desc(), spec->second, ctx, one);
+    ASSERT_FALSE(st.ok()) << texel;
+    EXPECT_EQ(st.status().code(), StatusCode::corrupt_data);
+    const std::string want = "non-finite value at texel (" + std::to_string(texel % 70) + ", " + std::to_string(texel / 70) + ")";
+    EXPECT_NE(st.status().message().find(want), std::string::npos) << st.status().message();
+    EXPECT_NE(st.status().message().find(path), std::string::npos) << st.status().message();
+    std::remove(path.c_str());
+  }
 }
