@@ -258,7 +258,7 @@ TEST(Fmf, DfmfAutoOffsetScalesWithTheData) {
 }
 
 TEST(Fmf, NonFiniteInputIsAnError) {
-  // Every variant checks its input first (fmf.cpp), color=dfmf's automatic offset too.
+  // Small matrices (the exact path) are checked before the SVD (fmf.cpp), rgb and dfmf alike.
   for (const char* spec : {"fmf", "fmf:color=dfmf", "fmf:color=dfmf:offset=0.5"})
     for (float bad : {NAN, INFINITY, -INFINITY})
       for (size_t at : {size_t(0), size_t(17), size_t(4 * 4 * 2 * 2 * 3 - 1)}) {
