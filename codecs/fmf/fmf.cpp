@@ -212,8 +212,7 @@ class FmfCodec final : public Codec {
           // A non-finite value (ooc_svd.h): named where the input is intact, else (converted in
           // place in the first pass) its texel.
           if (!scratch) BTFC_RETURN_IF_ERROR(btf.check_finite("fmf input"));
-          const size_t i = find_non_finite(btf.data(), btf.size());
-          if (i < btf.size())
+          else if (const size_t i = find_non_finite(btf.data(), btf.size()); i < btf.size())
             return corrupt_data("fmf input: non-finite value at texel (" + std::to_string(i / d.abrdf_size() % size_t(d.width)) + ", " +
                                 std::to_string(i / d.abrdf_size() / size_t(d.width)) + ")");
         }
