@@ -88,6 +88,29 @@ TEST_P(CodecContract, EncodeDecodeShapeAndAccuracy) {
   EXPECT_GT(model->payload_bytes(), 0u);
 }
 
+TEST_P(CodecContract, ValuesNearTheLargestFloatGiveAModelOrAClearError) {
+  // Finite input whose sums pass the float range (the material scaled to a peak of 2.7e38):
+  // either a model that decodes to finite values, or an error that says so; never a crash
+  // (mlvq threw from its tensors) or a model of infinities and NaN (fmf, lpyr).
+  Btf huge = input();
+  const float s = 2.7e38f / peak(input());
+  for (size_t i = 0; i < huge.size(); ++i) huge.data()[i] *= s;
+  auto spec = resolve_spec(GetParam());
+  ASSERT_TRUE(spec.ok());
+  Context ctx;
+  auto m = codec->encode(huge, spec->second, ctx);
+  if (!m.ok()) {
+    EXPECT_EQ(m.status().code(), StatusCode::unsupported) << m.status().message();
+    EXPECT_NE(m.status().message().find("scale the BTF down"), std::string::npos) << m.status().message();
+    return;
+  }
+  Btf out;
+  ASSERT_TRUE(m.value()->decode_all(out).ok());
+  size_t bad = 0;
+  for (size_t i = 0; i < out.size(); ++i) bad += !std::isfinite(out.data()[i]);
+  EXPECT_EQ(bad, 0u) << "of " << out.size();
+}
+
 TEST_P(CodecContract, EvalAndEvalDirAgreeWithDecode) {
   const BtfDesc& d = input().desc();
   const float tol = 1e-4f * peak(input());

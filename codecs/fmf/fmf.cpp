@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 
 #include "codecs/fmf/fmf_model.h"
 #include "codecs/fmf/ooc_dfmf.h"
@@ -32,7 +33,7 @@ const ParamSpec k_params[] = {
      "storage of U and SxV: half / float, or q = per-component quantized integers, zstd-coded (fmf_quant.h)"},
     {"bits", ParamSpec::Type::integer, "8", 2, 20, {}, "precision=q: step = 2^-bits x RMS of the strongest eigen-texture (SxV column; per at least rows / 16 texels), U column k's step / sigma_k (equal error per component)"},
     {"textures", ParamSpec::Type::choice, "plain", 0, 0, {"plain", "dct"}, "precision=q: SxV columns coded as integers (plain) or as 8x8 DCT coefficients of the eigen-texture images (dct)"},
-    {"offset", ParamSpec::Type::real, "0", 0, 1e30, {}, "color=dfmf: luminance offset e of Y' = log(Y + e), U' = U / (Y + e); 0 = from the data (sum Y^2 / sum Y over up to 4096 evenly spaced texels); 1e-5 = Bonn's colour model 11 exactly"},
+    {"offset", ParamSpec::Type::real, "0", 0, k_dfmf_max_offset, {}, "color=dfmf: luminance offset e of Y' = log(Y + e), U' = U / (Y + e); 0 = from the data (sum Y^2 / sum Y over up to 4096 evenly spaced texels); 1e-5 = Bonn's colour model 11 exactly"},
 };
 
 std::span<const ParamSpec> params_table() { return k_params; }
@@ -70,8 +71,15 @@ void quantize(Block& b, bool half) {
   if (half && b.U.cols() > b.SxV.cols()) b.U.rightCols(b.U.cols() - b.SxV.cols()) = b.U.rightCols(b.U.cols() - b.SxV.cols()).unaryExpr(round_half);
 }
 
-// A factorized block from an SVD result, quantised; its statistics go to `stats`.
-Block block_from_svd(const std::string& name, SvdResult r, bool half, int max_rank, double target, ModelStats& stats) {
+// A factorized block from an SVD result, quantised; its statistics go to `stats`. Fails when the
+// factors do not fit float: SxV holds the singular values, which reach ||B||_F, so data of finite
+// floats can overflow them (a constant 12 x 10-texel BTF of 1e37 has sigma_1 = 1.5e40), and the
+// model would decode to infinities or NaN without a word.
+Result<Block> block_from_svd(const std::string& name, SvdResult r, bool half, int max_rank, double target, ModelStats& stats) {
+  if (!r.S.allFinite() || (r.S.size() && r.S.maxCoeff() > double(std::numeric_limits<float>::max())) || !r.U.allFinite() ||
+      !r.SxV.allFinite())
+    return unsupported("fmf: the factors of block '" + name + "' overflow float (a singular value, which reaches the data's " +
+                       "norm sqrt(sum of squares), past 3.4e38): the values are too large for fmf; scale the BTF down");
   Block b{name, std::move(r.U), std::move(r.SxV), r.S.cast<float>(), {}, {}};
   quantize(b, half);
   const int kept = int(b.U.cols());
@@ -164,7 +172,8 @@ class FmfCodec final : public Codec {
       o.truncation_ok = true;  // a rank-C model is the leading C components of a larger one
       if (dfmf_target) o.target_rel_error = 0;
       BTFC_ASSIGN_OR_RETURN(SvdResult r, truncated_svd(B, rows, d.num_texels(), o));
-      blocks.push_back(block_from_svd(name, std::move(r), cfg.half, max_rank, o.target_rel_error, stats));
+      BTFC_ASSIGN_OR_RETURN(Block b, block_from_svd(name, std::move(r), cfg.half, max_rank, o.target_rel_error, stats));
+      blocks.push_back(std::move(b));
       return {};
     };
     Params rp = p;
@@ -214,10 +223,14 @@ class FmfCodec final : public Codec {
           if (!scratch) BTFC_RETURN_IF_ERROR(btf.check_finite("fmf input"));
           else if (const size_t i = find_non_finite(btf.data(), btf.size()); i < btf.size())
             return corrupt_data("fmf input: non-finite value at texel (" + std::to_string(i / d.abrdf_size() % size_t(d.width)) + ", " +
-                                std::to_string(i / d.abrdf_size() / size_t(d.width)) + ")");
+                                std::to_string(i / d.abrdf_size() / size_t(d.width)) +
+                                ") (a NaN or infinity, or finite values whose luminance + offset pass the float range, 3.4e38)");
         }
         BTFC_ASSIGN_OR_RETURN(std::vector<SvdResult> rs, std::move(r));
-        for (int k = 0; k < 3; ++k) blocks.push_back(block_from_svd(names[k], std::move(rs[k]), cfg.half, ranks[k], 0, stats));
+        for (int k = 0; k < 3; ++k) {
+          BTFC_ASSIGN_OR_RETURN(Block b, block_from_svd(names[k], std::move(rs[k]), cfg.half, ranks[k], 0, stats));
+          blocks.push_back(std::move(b));
+        }
         clamped = size_t(cl);
       } else {
         // Exact (small direction sets): one decorrelated channel matrix at a time, peak memory
@@ -373,7 +386,8 @@ Result<std::unique_ptr<Model>> model_from_svds(const BtfDesc& desc, const Params
     if (size_t(r.U.rows()) != rows || size_t(r.SxV.rows()) != desc.num_texels() || r.U.cols() != r.SxV.cols())
       return invalid_argument("fmf: factor shapes disagree with the BTF (" + desc.summary() + ")");
     const int max_rank = k == 0 ? rank : (chroma ? chroma : rank);
-    blocks.push_back(block_from_svd(cfg.dfmf ? names[k] : "rgb", std::move(r), cfg.half, max_rank, p.get_real("target_error"), stats));
+    BTFC_ASSIGN_OR_RETURN(Block b, block_from_svd(cfg.dfmf ? names[k] : "rgb", std::move(r), cfg.half, max_rank, p.get_real("target_error"), stats));
+    blocks.push_back(std::move(b));
   }
   BTFC_ASSIGN_OR_RETURN(Params used, with_used_ranks(p, blocks));
   auto model = std::make_unique<FmfModel>(desc, used.canonical(), cfg, std::move(blocks));

@@ -138,6 +138,10 @@ size_t dfmf_channels(const float* abrdf, size_t rows, float offset, float* y, fl
 // largest float (the Y weights are positive and sum to 1).
 bool dfmf_luminance_moments(const float* abrdf, size_t rows, double* sum_y, double* sum_y2);
 double dfmf_auto_offset(double sum_y, double sum_y2);
+// The offset parameter's ceiling, and the automatic offset's: the largest float, as its 9-digit
+// spelling in a spec (3.4028234e38 rounds to FLT_MAX) stays within it. Not lower, so that e
+// scales with any finite data (the encode of a BTF times s is that of the BTF, e times s).
+constexpr double k_dfmf_max_offset = 3.4028234e38;
 // The texels the automatic offset is taken from: m = min(texels, 4096) evenly spaced ones,
 // texel i x texels / m (integer division) for i < m, increasing. e is a scale (the data's
 // energy-weighted mean luminance), which a few thousand texels give to a fraction of a percent

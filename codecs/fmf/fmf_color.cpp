@@ -541,8 +541,10 @@ double dfmf_auto_offset(double sum_y, double sum_y2) {
   // values) a fixed 1e-5 dwarfs every luminance, Y' = log(Y + e) then barely moves, and its half
   // floats' steps became 13-27 % errors (a 4 x 4 synth times 1e-6: relative L2 0.27 against 9e-4
   // at scale 1). The smallest normal float keeps e a normal float for data near underflow.
+  // e is at most the largest luminance, a float; the ceiling keeps its 9-digit spelling in the
+  // spec (dfmf_with_offset) within the parameter's range.
   const double e = sum_y > 0 ? sum_y2 / sum_y : 0;
-  return std::isfinite(e) && e > 0 ? std::max(e, double(std::numeric_limits<float>::min())) : k_drr_eps;
+  return std::isfinite(e) && e > 0 ? std::clamp(e, double(std::numeric_limits<float>::min()), k_dfmf_max_offset) : k_drr_eps;
 }
 
 std::vector<size_t> dfmf_offset_sample(size_t texels) {

@@ -117,6 +117,13 @@ Result<std::vector<SvdResult>> dfmf_streaming_svds(const ChunkSource& base, cons
   auto count = [&](size_t c, size_t o, uint64_t n) { per_chunk[c] = (o == 0 ? 0 : per_chunk[c]) + n; };
   fmf::ChunkSplit split;
   split.channels = 3, split.rows = rows;
+  // Finite RGB values give a non-finite channel only where Y + e (or a chroma sum) passes the
+  // largest float: data near 3.4e38.
+  split.non_finite_cause = [](size_t i) {
+    return std::string(i == 0 ? " in Y'" : i == 1 ? " in U'" : " in V'") +
+           ": from a NaN or infinity in the BTF, or finite values whose luminance + offset pass the float range (3.4e38); "
+           "scale the BTF down";
+  };
   split.split = [&](size_t c, size_t o, const float* B, size_t k, float* const* out) {
     uint64_t n = 0;
 #pragma omp parallel for reduction(+ : n) schedule(static)

@@ -335,7 +335,8 @@ Result<std::vector<SvdResult>> streaming_svds(const ChunkSource& src, const std:
     // The input check (ooc_svd.h): every process sees the same sums, so all return here alike.
     for (size_t a = 0; a < active.size(); ++a)
       if (!ks[active[a]].finite_energy(run.sums().data() + off[a]))
-        return corrupt_data("streamed SVD input: matrix " + std::to_string(active[a]) + " holds a non-finite value (NaN or infinity)");
+        return corrupt_data("streamed SVD input: matrix " + std::to_string(active[a]) + " holds a non-finite value (NaN or infinity)" +
+                            (split && split->non_finite_cause ? split->non_finite_cause(active[a]) : std::string()));
     // The steps between passes (orthonormalisation, the stopping test) are each factorization's
     // own: color=dfmf's three on both threads (on one, they left the other idle for 3 % of an
     // encode at UBO2003 size; docs/benchmarks.md). The same bits in any order.

@@ -90,6 +90,9 @@ struct ChunkSplit {
   std::function<float*(size_t c, size_t offset)> in_place;
   std::function<void(size_t c, size_t offset, float* B, size_t count)> split_in_place;
   size_t part_values = 0;  // values per matrix in a part; 0: ~8 M (tests take small parts)
+  // What a non-finite matrix i means besides a NaN or infinity in the source (the first pass's
+  // failure, below), e.g. a conversion that overflows finite values; empty: nothing.
+  std::function<std::string(size_t i)> non_finite_cause;
 };
 
 // streaming_svd of each of split's matrices (opts[i] for matrix i), all in one stream: every

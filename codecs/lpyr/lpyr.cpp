@@ -229,6 +229,12 @@ struct Encoder {
     // The spec records the levels used (levels=0 resolved, as lpca's clusters=0; levels beyond
     // the texture clamped).
     BTFC_ASSIGN_OR_RETURN(Params used, with_value(p, "levels", std::to_string(lmax + 1), k_params));
+    // Finite input near the largest float overflows the YCbCr sums and the PCA (a BTF of values
+    // up to 2.8e38 gave infinities and NaN in 5 M of 5.2 M decoded values): an error, not a model.
+    for (const Level& l : levels)
+      for (const Block& b : l.ch)
+        if (!b.E.allFinite() || !b.D.allFinite() || !b.mean.allFinite() || !b.scale.allFinite())
+          return unsupported("lpyr: the pyramid's values overflow float (input values near the largest float, 3.4e38): scale the BTF down");
     auto model = std::make_unique<LpyrModel>(d, used.canonical(), cfg, std::move(levels), phong, ph, chroma);
     ModelStats& ms = model->mutable_stats();
     ms.numbers.insert(ms.numbers.begin(), stats.numbers.begin(), stats.numbers.end());

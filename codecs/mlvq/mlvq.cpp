@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 
 #include "codecs/mlvq/mlvq_internal.h"
 #include "core/cl_runtime.h"
@@ -136,6 +137,15 @@ class MlvqCodec final : public Codec {
         o.scheme = s;
         Candidate c;
         BTFC_ASSIGN_OR_RETURN(Hierarchy h, encode_hierarchy(btf, o, c.rep));
+        // Finite input can still overflow the level-1 values (luminance sums of values near
+        // 3.4e38), which the stored tensors cannot hold (MlvqModel::tensors): an error, not a model.
+        for (const std::vector<float>* v : {&h.lum[1].values, &h.chroma[1].values})
+          if (std::any_of(v->begin(), v->end(), [](float x) { return !std::isfinite(x); })) {
+            char top[32];
+            std::snprintf(top, sizeof top, "%.3g", double(mx));
+            return unsupported(std::string("mlvq: the codebook values overflow float (input values up to ") + top +
+                               ", near the largest float 3.4e38): scale the BTF down");
+          }
         c.model = std::make_unique<MlvqModel>(d, p.canonical(), std::move(h), huffman);
         c.bytes = c.model->payload_bytes();
         cands.push_back(std::move(c));
