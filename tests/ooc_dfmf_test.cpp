@@ -355,11 +355,11 @@ static void set_splits(size_t m, SplitValue value, float* kept, const MatrixChun
                 size_t* splits) {
   const size_t in_rows = 3 * m;
   plain.channels = in_place.channels = 3, plain.rows = in_place.rows = m;
-  plain.split = [=](size_t, size_t, const float* B, size_t count, float* const* out) {
+  plain.split = [=](size_t, size_t, const float* B, size_t count, float* const* out, size_t ld) {
     if (splits) ++*splits;
     for (size_t t = 0; t < count; ++t)
       for (size_t r = 0; r < m; ++r)
-        for (size_t i = 0; i < 3; ++i) out[i][t * m + r] = value(B + t * in_rows, i, r);
+        for (size_t i = 0; i < 3; ++i) out[i][t * ld + r] = value(B + t * in_rows, i, r);
   };
   in_place.in_place = [=, &dst](size_t c, size_t off) { return kept + (dst.chunk_first(c) + off) * in_rows; };
   in_place.split_in_place = [=](size_t, size_t, float* B, size_t count) {

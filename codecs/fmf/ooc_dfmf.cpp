@@ -124,11 +124,11 @@ Result<std::vector<SvdResult>> dfmf_streaming_svds(const ChunkSource& base, cons
            ": from a NaN or infinity in the BTF, or finite values whose luminance + offset pass the float range (3.4e38); "
            "scale the BTF down";
   };
-  split.split = [&](size_t c, size_t o, const float* B, size_t k, float* const* out) {
+  split.split = [&](size_t c, size_t o, const float* B, size_t k, float* const* out, size_t ld) {
     uint64_t n = 0;
 #pragma omp parallel for reduction(+ : n) schedule(static)
     for (long long t = 0; t < (long long)k; ++t) {
-      const size_t at = size_t(t) * rows;
+      const size_t at = size_t(t) * ld;
       n += dfmf_channels(B + size_t(t) * in_rows, rows, offset, out[0] + at, out[1] + at, out[2] + at);
     }
     count(c, o, n);

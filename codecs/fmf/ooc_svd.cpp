@@ -269,23 +269,23 @@ Result<std::vector<SvdResult>> streaming_svds(const ChunkSource& src, const std:
     if (!split->in_place) parts.reset(static_cast<float*>(page_alloc(channels * m * part * sizeof(float))));
   }
   std::vector<float*> outs(channels);
-  // Same sketch in every factorization of a split in place (color=dfmf's channels at their
-  // default ranks): the first pass sums one sketch of each texel's whole column, its channels
-  // stacked, instead of one per channel: pieces three times as long, one parallel region instead
-  // of three (the three sketches 0.46-0.54 s -> 0.34 s of a UBO2003-size encode;
-  // docs/benchmarks.md). W has the same bits; the energies are summed by channel in the same call.
+  // Same sketch in every factorization of a split (color=dfmf's channels at their default
+  // ranks): the first pass sums one sketch of each texel's whole column, its channels stacked, instead of one per
+  // channel: pieces three times as long, one parallel region instead of three (in place, the
+  // three sketches 0.46-0.54 s -> 0.34 s of a UBO2003-size encode; docs/benchmarks.md). W has
+  // the same bits; the energies are summed by channel in the same call.
   auto same_sketch = [](const Sketch* a, const Sketch* b) {
     return a && b && a->S.m == b->S.m && a->S.s == b->S.s && a->S.layers == b->S.layers && a->S.pick == b->S.pick &&
            a->S.negative == b->S.negative;
   };
   const Sketch* stacked = nullptr;
-  if (split && split->in_place) {
+  if (split) {
     stacked = ks[0].summed_sketch();
     for (const Krylov& k : ks) stacked = same_sketch(stacked, k.summed_sketch()) ? stacked : nullptr;
   }
   std::vector<float> stacked_w;
   std::vector<double> stacked_e;
-  if (stacked) stacked_w.assign(src.rows() * stacked->S.s, 0.0f), stacked_e.assign(channels, 0.0);
+  if (stacked) stacked_w.assign(channels * m * stacked->S.s, 0.0f), stacked_e.assign(channels, 0.0);
   for (bool first = true;; first = false) {
     std::vector<size_t> active, off;
     size_t payload = 0;
@@ -305,19 +305,18 @@ Result<std::vector<SvdResult>> streaming_svds(const ChunkSource& src, const std:
         // In place: split once, in the first pass, each column where it was (ChunkSplit).
         for (size_t o = 0; o < k; o += part) {
           const size_t h = std::min(part, k - o);
-          size_t ld = m;
+          // Each column's matrices one after the other, in place or in the part buffer.
+          const size_t ld = channels * m;
+          float* const at = split->in_place ? split->in_place(c, o) : parts.get();
+          for (size_t i = 0; i < channels; ++i) outs[i] = at + i * m;
           if (split->in_place) {
-            float* const at = split->in_place(c, o);
             if (first) split->split_in_place(c, o, at, h);
-            for (size_t i = 0; i < channels; ++i) outs[i] = at + i * m;
-            ld = src.rows();
-            if (first && stacked) {
-              column_sketch_sums(at, src.rows(), h, *stacked, stacked_w.data(), stacked_e.data(), src.chunk_first(c) + o, ld, m);
-              continue;
-            }
           } else {
-            for (size_t i = 0; i < channels; ++i) outs[i] = parts.get() + i * m * h;
-            split->split(c, o, B + o * src.rows(), h, outs.data());
+            split->split(c, o, B + o * src.rows(), h, outs.data(), ld);
+          }
+          if (first && stacked) {
+            column_sketch_sums(at, ld, h, *stacked, stacked_w.data(), stacked_e.data(), src.chunk_first(c) + o, ld, m);
+            continue;
           }
           for (size_t a = 0; a < active.size(); ++a)
             ks[active[a]].slice(c, k, src.chunk_first(c), o, outs[active[a]], h, ld, sums + off[a]);
@@ -327,7 +326,7 @@ Result<std::vector<SvdResult>> streaming_svds(const ChunkSource& src, const std:
     };
     auto pack = [&](double* d) {
       if (first && stacked)
-        for (size_t i = 0; i < channels; ++i) ks[i].use_sketch_sums(stacked_w.data() + i * m, src.rows(), stacked_e[i]);
+        for (size_t i = 0; i < channels; ++i) ks[i].use_sketch_sums(stacked_w.data() + i * m, channels * m, stacked_e[i]);
       for (size_t a = 0; a < active.size(); ++a) ks[active[a]].pack(d + off[a]);
       if (first && stacked) std::vector<float>().swap(stacked_w);
     };

@@ -69,12 +69,14 @@ Result<SvdResult> streaming_svd(const ChunkSource& src, const std::vector<size_t
 
 // Several matrices from one stream, e.g. color=dfmf's three channel matrices (ooc_dfmf.h): split
 // turns a part of a chunk (the source's rows x count floats, column-major; `offset` texels into
-// chunk c) into `channels` matrices of `rows` rows (rows x count each), written to out[0..).
-// Called on the thread that runs the products, one part at a time, parts in order.
+// chunk c) into `channels` matrices of `rows` rows (rows x count each, column t of matrix i at
+// out[i] + t x ld). Called on the thread that runs the products, one part at a time, parts in
+// order. The part buffers hold each column's matrices one after the other (out[i] = buffer + i x
+// rows, ld = channels x rows), the layout of a split in place (below).
 struct ChunkSplit {
   int channels = 1;
   size_t rows = 0;
-  std::function<void(size_t c, size_t offset, const float* B, size_t count, float* const* out)> split;
+  std::function<void(size_t c, size_t offset, const float* B, size_t count, float* const* out, size_t ld)> split;
   // Optional, both or neither: where part (c, offset) of the source lies in writable memory
   // whose values the caller no longer needs (an in-memory BTF's own, which MatrixChunks maps),
   // and the split done there: split_in_place turns each of the part's `count` columns (the
@@ -86,7 +88,8 @@ struct ChunkSplit {
   // for bit those of `split` when both give the same values. Where every factorization's first
   // pass sums the same sparse sketch (equal texels, buckets and seed: color=dfmf's three at the
   // default chroma rank), that pass sketches each texel's column once, its matrices stacked
-  // (column_sketch_sums with a segment per matrix): the same sums, each matrix's energy apart.
+  // (column_sketch_sums with a segment per matrix): the same sums, each matrix's energy apart;
+  // so does a split into part buffers, whose layout is the same.
   std::function<float*(size_t c, size_t offset)> in_place;
   std::function<void(size_t c, size_t offset, float* B, size_t count)> split_in_place;
   size_t part_values = 0;  // values per matrix in a part; 0: ~8 M (tests take small parts)
