@@ -270,10 +270,11 @@ Result<std::vector<SvdResult>> streaming_svds(const ChunkSource& src, const std:
   }
   std::vector<float*> outs(channels);
   // Same sketch in every factorization of a split (color=dfmf's channels at their default
-  // ranks): the first pass sums one sketch of each texel's whole column, its channels stacked, instead of one per
-  // channel: pieces three times as long, one parallel region instead of three (in place, the
-  // three sketches 0.46-0.54 s -> 0.34 s of a UBO2003-size encode; docs/benchmarks.md). W has
-  // the same bits; the energies are summed by channel in the same call.
+  // ranks): the first pass sums one sketch of each texel's whole column, its channels stacked,
+  // instead of one per channel: pieces three times as long, one parallel region instead of three
+  // (in place, the three sketches 0.46-0.54 s -> 0.34 s of a UBO2003-size encode; out of core the
+  // first pass 5-10 % shorter; docs/benchmarks.md). W has the same bits; the energies are summed
+  // by channel in the same call.
   auto same_sketch = [](const Sketch* a, const Sketch* b) {
     return a && b && a->S.m == b->S.m && a->S.s == b->S.s && a->S.layers == b->S.layers && a->S.pick == b->S.pick &&
            a->S.negative == b->S.negative;
