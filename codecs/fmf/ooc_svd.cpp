@@ -273,7 +273,7 @@ Result<std::vector<SvdResult>> streaming_svds(const ChunkSource& src, const std:
   // ranks): the first pass sums one sketch of each texel's whole column, its channels stacked,
   // instead of one per channel: pieces three times as long, one parallel region instead of three
   // (in place, the three sketches 0.46-0.54 s -> 0.34 s of a UBO2003-size encode; out of core the
-  // first pass 5-10 % shorter; docs/benchmarks.md). W has the same bits; the energies are summed
+  // first pass by a few per cent; docs/benchmarks.md). W has the same bits; the energies are summed
   // by channel in the same call.
   auto same_sketch = [](const Sketch* a, const Sketch* b) {
     return a && b && a->S.m == b->S.m && a->S.s == b->S.s && a->S.layers == b->S.layers && a->S.pick == b->S.pick &&
@@ -306,10 +306,13 @@ Result<std::vector<SvdResult>> streaming_svds(const ChunkSource& src, const std:
         // In place: split once, in the first pass, each column where it was (ChunkSplit).
         for (size_t o = 0; o < k; o += part) {
           const size_t h = std::min(part, k - o);
-          // Each column's matrices one after the other, in place or in the part buffer.
-          const size_t ld = channels * m;
+          // Each column's matrices one after the other (in place, and in the part buffer for the
+          // first pass's stacked sketch), else each matrix contiguous: the later passes' products
+          // ran 3-6 % slower on the stacked parts out of core (docs/benchmarks.md).
+          const bool stack = split->in_place || (first && stacked);
+          const size_t ld = stack ? channels * m : m;
           float* const at = split->in_place ? split->in_place(c, o) : parts.get();
-          for (size_t i = 0; i < channels; ++i) outs[i] = at + i * m;
+          for (size_t i = 0; i < channels; ++i) outs[i] = at + i * (stack ? m : m * h);
           if (split->in_place) {
             if (first) split->split_in_place(c, o, at, h);
           } else {

@@ -71,8 +71,9 @@ Result<SvdResult> streaming_svd(const ChunkSource& src, const std::vector<size_t
 // turns a part of a chunk (the source's rows x count floats, column-major; `offset` texels into
 // chunk c) into `channels` matrices of `rows` rows (rows x count each, column t of matrix i at
 // out[i] + t x ld). Called on the thread that runs the products, one part at a time, parts in
-// order. The part buffers hold each column's matrices one after the other (out[i] = buffer + i x
-// rows, ld = channels x rows), the layout of a split in place (below).
+// order. For a stacked first-pass sketch (below) the part buffer holds each column's matrices one
+// after the other (out[i] = buffer + i x rows, ld = channels x rows), the layout of a split in
+// place; otherwise each matrix contiguous (out[i] = buffer + i x rows x count, ld = rows).
 struct ChunkSplit {
   int channels = 1;
   size_t rows = 0;
@@ -89,7 +90,7 @@ struct ChunkSplit {
   // pass sums the same sparse sketch (equal texels, buckets and seed: color=dfmf's three at the
   // default chroma rank), that pass sketches each texel's column once, its matrices stacked
   // (column_sketch_sums with a segment per matrix): the same sums, each matrix's energy apart;
-  // so does a split into part buffers, whose layout is the same.
+  // so does the first pass of a split into part buffers (above).
   std::function<float*(size_t c, size_t offset)> in_place;
   std::function<void(size_t c, size_t offset, float* B, size_t count)> split_in_place;
   size_t part_values = 0;  // values per matrix in a part; 0: ~8 M (tests take small parts)
