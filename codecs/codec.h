@@ -132,7 +132,11 @@ class Codec {
   // For each the knob is searched and the most accurate (PSNR) model that fits wins. Empty: the
   // knob alone. Listed from the most to the least accurate at equal knob (half, then q at falling
   // bit depths): once one fits at budget_knob_limit, the later ones cannot beat it and are skipped.
-  virtual std::vector<std::string> budget_variants() const { return {}; }
+  // `spec` is the user's spec, resolved (a setting can depend on it: fmf's colour mode).
+  virtual std::vector<std::string> budget_variants(const Params& spec) const {
+    (void)spec;
+    return {};
+  }
   // Settings a quality search (--target-psnr / --target-ssim) escalates to, in order, when the
   // knob alone cannot reach the target: spec fragments laid over the spec as budget_variants'
   // (keys the user's spec sets are kept). Empty: the knob alone. For codecs whose quality has

@@ -241,7 +241,7 @@ Result<TargetChoice> choose_for_target(const Btf& btf, const std::string& spec, 
   // A byte budget: where the knob counts components of a randomized SVD (fmf's rank), the probes
   // take the leading components of a few larger factorizations (core/svd.h).
   const RandomizedSvdReuse randomized(int(std::min<long long>(INT_MAX, resolved.first->budget_knob_limit(btf.desc()))));
-  const std::vector<std::string> variants = resolved.first->budget_variants();
+  const std::vector<std::string> variants = resolved.first->budget_variants(resolved.second);
   if (variants.empty()) return search_knob(btf, spec, target, ctx);
   // A byte budget over the codec's settings: the knob per setting, then the best PSNR.
   BTFC_ASSIGN_OR_RETURN(SpecString base, parse_spec_string(spec));

@@ -184,6 +184,37 @@ size_t find_non_finite(const float* d, size_t n) {
   return i;
 }
 
+float max_abs(const float* d, size_t n) {
+  const size_t block = size_t(1) << 16, blocks = (n + block - 1) / block;
+  float peak = 0;
+#pragma omp parallel for reduction(max : peak) schedule(static) if (blocks > 16)
+  for (int64_t b = 0; b < int64_t(blocks); ++b) {
+    const size_t i0 = size_t(b) * block, i1 = std::min(n, i0 + block);
+    float m = 0;
+    for (size_t i = i0; i < i1; ++i) m = std::max(m, std::abs(d[i]));
+    peak = std::max(peak, m);
+  }
+  return peak;
+}
+
+int fit_scale_exponent(float peak) {
+  if (!(peak > 0) || !std::isfinite(peak)) return 0;
+  const int e = std::ilogb(peak);  // peak in [2^e, 2^(e + 1))
+  return e < -32 || e >= 32 ? -e : 0;
+}
+
+Result<Btf> scaled_copy(const Btf& btf, int k) {
+  BTFC_ASSIGN_OR_RETURN(Btf out, Btf::create(btf.desc()));
+  const float* s = btf.data();
+  float* d = out.data();
+  const int64_t n = int64_t(btf.size());
+  // Two factors: 2^k alone passes the float range for |k| > 127 (subnormal peaks).
+  const float f1 = std::ldexp(1.0f, k / 2), f2 = std::ldexp(1.0f, k - k / 2);
+#pragma omp parallel for schedule(static) if (n > (int64_t(1) << 20))
+  for (int64_t i = 0; i < n; ++i) d[i] = s[i] * f1 * f2;
+  return out;
+}
+
 Status Btf::check_finite(const std::string& what) const {
   const size_t n = m_data.size(), i = find_non_finite(m_data.data(), n);
   if (i == n) return {};

@@ -141,4 +141,15 @@ class Btf {
 // parallel over blocks: multi-GB inputs are checked on every read.
 size_t find_non_finite(const float* v, size_t n);
 
+// The largest |v[i]| of v[0, n) (finite values; 0 for none). Parallel over blocks, as above.
+float max_abs(const float* v, size_t n);
+
+// Codecs whose fits sum squares of the values in float (lpca's clustering, mlvq's search) meet
+// overflow past ~1e17 and underflow below ~1e-19. Such a codec fits a copy scaled by 2^k (exact)
+// when the largest |value| lies outside [2^-32, 2^32], and scales its model back: k brings that
+// value into [1, 2); 0 inside the range, for all-zero data and for a non-finite peak.
+int fit_scale_exponent(float peak);
+// A copy of btf with every value times 2^k (exact for normal results).
+Result<Btf> scaled_copy(const Btf& btf, int k);
+
 }  // namespace btfc

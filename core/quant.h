@@ -41,6 +41,18 @@ namespace btfc::quant {
 // bits 8 in fmf, lpca and lpyr (docs/benchmarks.md, "Bits where they matter").
 inline double step_texels(double texels, double abrdf_values) { return std::max({1.0, texels, abrdf_values / 16}); }
 
+// A codec's step for a column whose largest |value| is max_abs, made safe: at least
+// max_abs / 2^29 (the integers stay within +-2^29), a normal float, and never so large that a
+// value rounded to it passes the float range: up to 2^126 while max_abs is below half the
+// largest float (|value| + step / 2 stays below it), else up to 2^100. (A fixed 1e-30 .. 1e30
+// clamp coded BTFs scaled past 1e30 with needlessly fine steps and those below 1e-30 with
+// coarse ones.)
+inline float safe_step(double step, double max_abs) {
+  step = std::max(step, max_abs / 536870912.0);
+  const double top = max_abs < 1.7e38 ? 0x1p126 : 0x1p100;
+  return float(std::clamp(step, 0x1p-126, top));
+}
+
 struct Layout {
   bool dct = false;  // columns are images coded as 8x8 DCT coefficients
   uint32_t width = 0, height = 0;  // the image size when dct (rows = width * height)

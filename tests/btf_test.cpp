@@ -116,6 +116,38 @@ TEST(DecodeRequest, ResolvesSubsetsAndRejectsBadOnes) {
 
 // find_non_finite: first NaN / Inf over many blocks (the parallel, vectorized path), none, and
 // a value in the last partial block.
+TEST(Btf, FitScaleExponentAndTheScaledCopy) {
+  // Inside [2^-32, 2^32] nothing is scaled; outside, 2^k brings the peak into [1, 2).
+  EXPECT_EQ(btfc::fit_scale_exponent(1.0f), 0);
+  EXPECT_EQ(btfc::fit_scale_exponent(std::ldexp(1.0f, 32) * 0.999f), 0);
+  EXPECT_EQ(btfc::fit_scale_exponent(std::ldexp(1.0f, -32)), 0);
+  EXPECT_EQ(btfc::fit_scale_exponent(std::ldexp(1.0f, 32)), -32);
+  EXPECT_EQ(btfc::fit_scale_exponent(std::ldexp(1.0f, -33)), 33);
+  EXPECT_EQ(btfc::fit_scale_exponent(3e38f), -127);
+  EXPECT_EQ(btfc::fit_scale_exponent(1e-40f), 133);  // subnormal: ilogb -133
+  EXPECT_EQ(btfc::fit_scale_exponent(0.0f), 0);
+  EXPECT_EQ(btfc::fit_scale_exponent(INFINITY), 0);
+  EXPECT_EQ(btfc::fit_scale_exponent(NAN), 0);
+  btfc::BtfDesc d;
+  d.width = 3, d.height = 1;
+  d.lights.dirs = {btfc::Vec3{0, 0, 1}}, d.views.dirs = {btfc::Vec3{0, 0, 1}};
+  btfc::Btf b = btfc::Btf::create(d).value();
+  const float v[9] = {1e-40f, -2e-39f, 0, 3e-38f, -1e-45f, 5e-41f, 1e-39f, 0, -7e-40f};
+  std::copy(v, v + 9, b.data());
+  EXPECT_EQ(btfc::max_abs(b.data(), b.size()), 3e-38f);
+  const int k = btfc::fit_scale_exponent(btfc::max_abs(b.data(), b.size()));
+  EXPECT_EQ(k, 125);
+  auto up = btfc::scaled_copy(b, k);
+  ASSERT_TRUE(up.ok());
+  for (size_t i = 0; i < 9; ++i) EXPECT_EQ(up->data()[i], std::ldexp(v[i], k)) << i;  // exact, subnormals too
+  auto back = btfc::scaled_copy(up.value(), -k);
+  ASSERT_TRUE(back.ok());
+  for (size_t i = 0; i < 9; ++i) EXPECT_EQ(back->data()[i], v[i]) << i;
+  std::vector<float> big(100000, -2.0f);
+  big[77777] = -3.4e38f;
+  EXPECT_EQ(btfc::max_abs(big.data(), big.size()), 3.4e38f);
+}
+
 TEST(Btf, FindNonFiniteFindsTheFirstOne) {
   std::vector<float> v((size_t(1) << 16) * 40 + 7, 0.5f);
   EXPECT_EQ(btfc::find_non_finite(v.data(), v.size()), v.size());

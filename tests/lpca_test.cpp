@@ -215,6 +215,29 @@ TEST(Lpca, DeterministicBySeedOnBothPcaPaths) {
   }
 }
 
+TEST(Lpca, BtfsOutsideTheFloatSquaresRangeGetTheirNormalRangeModel) {
+  // The fit sums squares in float: a BTF times 2^-100 underflowed them, one times 2^80
+  // overflowed them (relative L2 0.42 and 0.62 where the BTF at scale 1 gives 0.31, half and q
+  // alike); and precision=q capped a cluster mean's step at 4 (a larger file past ~1e30). Each
+  // scale now gets the scale-1 model times 2^k: the same error, the same bytes within a few.
+  const Btf base = synth(8, 8, DirectionSet::ubo2003(), 1, 2);
+  for (const char* spec : {"lpca:components=4", "lpca:components=4:precision=q", "lpca:components=4:precision=float"}) {
+    auto m1 = test::encode_spec(base, spec);
+    const double e1 = rel_error(base, decode(*m1));
+    ASSERT_GT(e1, 0.01) << spec;
+    for (int k : {-100, -40, 40, 80, 120}) {
+      Btf b = Btf::create(base.desc()).value();
+      for (size_t i = 0; i < b.size(); ++i) b.data()[i] = std::ldexp(base.data()[i], k);
+      auto m = test::encode_spec(b, spec);
+      const Btf out = decode(*m);
+      ASSERT_TRUE(all_finite(out)) << spec << " 2^" << k;
+      EXPECT_NEAR(rel_error(b, out), e1, 1e-4 * e1) << spec << " 2^" << k;
+      const double bytes = double(m->payload_bytes()), bytes1 = double(m1->payload_bytes());
+      EXPECT_NEAR(bytes, bytes1, 0.02 * bytes1) << spec << " 2^" << k;
+    }
+  }
+}
+
 TEST(LpcaSh, DenseProjectionOfKnownFunctions) {
   const int n = 6;
   auto c1 = sh::project_function(n, [](double, double, double) { return 1.0; }, 256);

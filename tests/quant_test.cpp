@@ -245,6 +245,60 @@ Btf synth(int w, int h) {
 
 }  // namespace
 
+TEST(FmfQuant, ErrorAndBytesDoNotDependOnTheBtfsUnits) {
+  // color=dfmf's Y' = log(Y + e) of a BTF times s is Y' + log s: with the step rule's sigma_1
+  // taken with that constant, the error grew with |log s| (relative L2 0.17 at s = 1, 0.46-0.50
+  // at 1e-6 and 1e6, 0.74 at 1e-30). And steps were floored at 1e-30 (rgb at s = 1e-30: 0.19
+  // against 0.165). Now the error and the bytes are those of s = 1 at every scale.
+  const Btf base = synth(16, 16);
+  for (const char* spec : {"fmf:rank=8:color=dfmf:precision=q:bits=6", "fmf:rank=8:color=dfmf:precision=q:bits=8",
+                           "fmf:rank=8:precision=q:bits=6"}) {
+    auto m1 = encode_spec(base, spec);
+    Btf d1;
+    ASSERT_TRUE(m1->decode_all(d1).ok());
+    const double e1 = compare_btf(base, d1, false)->rel_l2;
+    ASSERT_GT(e1, 0.01) << spec;
+    for (double s : {1e-30, 1e-6, 1e6, 1e30}) {
+      Btf b = Btf::create(base.desc()).value();
+      for (size_t i = 0; i < b.size(); ++i) b.data()[i] = float(base.data()[i] * s);
+      auto m = encode_spec(b, spec);
+      Btf out;
+      ASSERT_TRUE(m->decode_all(out).ok());
+      const double e = compare_btf(b, out, false)->rel_l2;
+      EXPECT_NEAR(e, e1, 0.02 * e1) << spec << " s " << s;
+      const double bytes = double(m->payload_bytes()), bytes1 = double(m1->payload_bytes());
+      EXPECT_NEAR(bytes, bytes1, 0.03 * bytes1) << spec << " s " << s;
+    }
+  }
+}
+
+TEST(FmfQuant, ByteBudgetsOfDfmfSearchDownToThreeBits) {
+  // Y' quantized by its variation holds more at equal bits than before (the test above), so a
+  // dfmf budget search goes one bit lower than rgb's (codecs/fmf/fmf.cpp).
+  const Codec* fmf = find_codec("fmf");
+  ASSERT_NE(fmf, nullptr);
+  auto dfmf = resolve_spec("fmf:color=dfmf"), rgb = resolve_spec("fmf");
+  ASSERT_TRUE(dfmf.ok() && rgb.ok());
+  const std::vector<std::string> vd = fmf->budget_variants(dfmf->second), vr = fmf->budget_variants(rgb->second);
+  ASSERT_FALSE(vd.empty());
+  EXPECT_EQ(vd.back(), "precision=q:bits=3");
+  EXPECT_EQ(vr.back(), "precision=q:bits=4");
+  EXPECT_EQ(vd.size(), vr.size() + 1);
+  // A synthetic 64 x 64 BTF under one view (as the real slice) at 15 kB: dfmf's search takes the
+  // 3-bit setting (rank 3, 27.4 dB; the 4-bit one fits rank 2 there, 25.4 dB).
+  SynthOptions o;
+  o.width = o.height = 64;
+  o.views.dirs = {dir_from_theta_phi(M_PI / 6, M_PI / 4)};
+  o.views.name = "custom";
+  const Btf b = synthesize_btf(o).value();
+  Context ctx;
+  Target t;
+  t.kind = Target::Kind::max_bytes, t.value = 15000;
+  auto c = choose_for_target(b, "fmf:color=dfmf", t, ctx);
+  ASSERT_TRUE(c.ok()) << c.status().message();
+  EXPECT_NE(c->spec.find("bits=3"), std::string::npos) << c->spec << c->variants;
+}
+
 TEST(FmfQuant, ModelSavesLoadsAndDecodesToTheSameValues) {
   const Btf b = synth(16, 16);
   for (const char* spec : {"fmf:rank=8:precision=q:bits=7", "fmf:rank=6:precision=q:bits=9:textures=dct",

@@ -156,7 +156,9 @@ class FmfModel final : public Model {
   // precision=q: U and SxV become their zq tensors and the values those decode to
   // (codecs/fmf/fmf_quant.h); the eigen-textures are width x height images for textures=dct.
   void quantize_block(Block& b) {
-    fmf::QuantizedFactors q = fmf::quantize_factors(b.name, b.U, b.SxV, m_cfg.quant, m_desc.width, m_desc.height);
+    fmf::QuantConfig qc = m_cfg.quant;
+    qc.centred = m_cfg.dfmf && b.name == "y";  // log luminance (fmf_quant.h)
+    fmf::QuantizedFactors q = fmf::quantize_factors(b.name, b.U, b.SxV, qc, m_desc.width, m_desc.height);
     if (!q.status.ok()) m_quant_status = q.status;
     b.U = std::move(q.U), b.SxV = std::move(q.SxV), b.coded = std::move(q.coded);
     b.scale = Eigen::VectorXf::Ones(b.SxV.cols());

@@ -10,26 +10,35 @@
 
 namespace btfc::fmf {
 
-void quant_steps(const MatrixXfR& U, const MatrixXfR& SxV, int bits, std::vector<float>& u_steps, std::vector<float>& sxv_steps) {
+void quant_steps(const MatrixXfR& U, const MatrixXfR& SxV, int bits, std::vector<float>& u_steps, std::vector<float>& sxv_steps,
+                 bool centred) {
   const Eigen::Index C = SxV.cols();
   // The header's D: the strongest eigen-texture's RMS, over at least U's rows / 16 texels.
   const double texels = quant::step_texels(double(SxV.rows()), double(U.rows()));
   std::vector<double> sigma(static_cast<size_t>(C), 0.0);
-  double s1 = 0;
-  for (Eigen::Index k = 0; k < C; ++k) s1 = std::max(s1, sigma[size_t(k)] = SxV.col(k).cast<double>().norm());
+  double s1 = 0, s2 = 0;
+  for (Eigen::Index k = 0; k < C; ++k) {
+    const double sk = sigma[size_t(k)] = SxV.col(k).cast<double>().norm();
+    if (sk > s1) s2 = s1, s1 = sk;
+    else s2 = std::max(s2, sk);
+  }
+  if (centred && U.rows() > 0 && SxV.rows() > 0) {
+    // The strongest component without the matrix's mean m (the header): the mean's energy
+    // rows x texels x m^2 is at most s1^2 (a rank-1 part), so sqrt(s1^2 - it) is what the
+    // strongest component varies by; the second-strongest bounds it below.
+    const Eigen::VectorXd colsum_u = U.cast<double>().colwise().sum().transpose(), colsum_s = SxV.cast<double>().colwise().sum().transpose();
+    const double rt = double(U.rows()) * double(SxV.rows()), m = colsum_u.dot(colsum_s) / rt;
+    s1 = std::max(std::sqrt(std::max(0.0, s1 * s1 - rt * m * m)), s2);
+  }
   double D = std::ldexp(s1 / std::sqrt(texels), -bits);
   if (!(D > 0) || !std::isfinite(D)) D = 1;  // all-zero factors: any step codes them exactly
   u_steps.resize(size_t(C)), sxv_steps.resize(size_t(C));
-  auto floor_step = [](double step, double max_abs) {  // integers stay within +-2^29
-    step = std::max(step, std::ldexp(max_abs, -29));
-    return float(std::clamp(step, 1e-30, 1e30));
-  };
   for (Eigen::Index k = 0; k < C; ++k) {
     const double sk = sigma[size_t(k)];
     // A component with sigma_k = 0 contributes nothing: a step of 4 rounds its |U| <= 1 to 0.
     const double dk = sk > 0 ? std::min(4.0, D / sk) : 4.0;
-    u_steps[size_t(k)] = floor_step(dk, U.rows() ? double(U.col(k).cwiseAbs().maxCoeff()) : 0.0);
-    sxv_steps[size_t(k)] = floor_step(D, SxV.rows() ? double(SxV.col(k).cwiseAbs().maxCoeff()) : 0.0);
+    u_steps[size_t(k)] = quant::safe_step(dk, U.rows() ? double(U.col(k).cwiseAbs().maxCoeff()) : 0.0);
+    sxv_steps[size_t(k)] = quant::safe_step(D, SxV.rows() ? double(SxV.col(k).cwiseAbs().maxCoeff()) : 0.0);
   }
 }
 
@@ -37,7 +46,7 @@ QuantizedFactors quantize_factors(const std::string& name, const MatrixXfR& U, c
                                   int height) {
   QuantizedFactors out;
   std::vector<float> us, ss;
-  quant_steps(U, SxV, cfg.bits, us, ss);
+  quant_steps(U, SxV, cfg.bits, us, ss, cfg.centred);
   const uint64_t C = uint64_t(U.cols());
   quant::Layout L;
   if (cfg.dct) L.dct = true, L.width = uint32_t(width), L.height = uint32_t(height);

@@ -12,7 +12,17 @@
 //     D = 2^-bits * sigma_1 / sqrt(max(texels, rows / 16))   (the RMS of the strongest eigen-texture),
 // so `bits` is about the bit depth of the strongest eigen-texture, and every setting adapts to
 // the data's scale. (rows / 16: with many more rows than texels, a few texels under many
-// directions, U's error, rows / texels times SxV's, would otherwise swamp the model.) A step is never below max|column| / 2^29 (integers stay in range).
+// directions, U's error, rows / texels times SxV's, would otherwise swamp the model.) A step is
+// never below max|column| / 2^29 (integers stay in range).
+//
+// color=dfmf's Y' = log(Y + e) takes sigma_1 without the block's mean (`centred`):
+//     sigma_1' = max(sqrt(sigma_1^2 - rows texels m^2), sigma_2),   m = the mean of U SxV^T.
+// A BTF times s has Y' + log s, a constant that lands in the strongest component and, through
+// sigma_1, in D, though an error in Y' is a relative error of Y at any s: with sigma_1 a synthetic
+// 16 x 16 BTF at bits 8 erred 0.17 (relative L2) at s = 1 and 0.46-0.50 at 1e6 and 1e-6. Even at
+// s = 1 the mean of log(Y + e) set Y''s steps, too coarse: byte budgets of 150 and 400 kB got
+// 1.6-3.9 dB more with sigma_1' on the real UBO2003 slice and the textile (docs/benchmarks.md,
+// "Bits where they matter").
 //
 // textures=dct: each SxV column (an image of width x height texels) is coded as its orthonormal
 // 8 x 8 DCT (the BSVTF tile transform, core/dct.h) with the same step D: the transform is
@@ -30,6 +40,7 @@ namespace btfc::fmf {
 struct QuantConfig {
   int bits = 0;      // 0: not quantized (half / float)
   bool dct = false;  // textures=dct
+  bool centred = false;  // D from sigma_1 without the block's mean (color=dfmf's Y', above)
 };
 
 struct QuantizedFactors {
@@ -39,7 +50,8 @@ struct QuantizedFactors {
 };
 
 // Steps of the rule above (first U's C steps, then SxV's C steps).
-void quant_steps(const MatrixXfR& U, const MatrixXfR& SxV, int bits, std::vector<float>& u_steps, std::vector<float>& sxv_steps);
+void quant_steps(const MatrixXfR& U, const MatrixXfR& SxV, int bits, std::vector<float>& u_steps, std::vector<float>& sxv_steps,
+                 bool centred = false);
 
 QuantizedFactors quantize_factors(const std::string& name, const MatrixXfR& U, const MatrixXfR& SxV, const QuantConfig& cfg, int width,
                                   int height);

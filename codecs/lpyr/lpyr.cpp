@@ -252,7 +252,7 @@ class LpyrCodec final : public Codec {
   uint32_t payload_version() const override { return k_payload_version; }
   std::span<const ParamSpec> params() const override { return k_params; }
   // --max-bytes searches y for half floats and for quantized payloads at three bit depths.
-  std::vector<std::string> budget_variants() const override {
+  std::vector<std::string> budget_variants(const Params&) const override {
     return {"precision=half", "precision=q:bits=8", "precision=q:bits=6", "precision=q:bits=4"};
   }
   long long budget_knob_limit(const BtfDesc& d) const override { return components_backed_by_texels(d); }

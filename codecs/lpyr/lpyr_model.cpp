@@ -38,10 +38,6 @@ void quantize(Block& b, bool half) {
 }
 
 namespace {
-float safe_step(double step, double max_abs) {  // integers within +-2^29 (core/quant.h), finite
-  step = std::max(step, std::ldexp(max_abs, -29));
-  return float(std::clamp(step, 1e-30, 1e30));
-}
 std::string tname(const char* what, int k, int c) { return std::string(what) + "." + std::to_string(k) + "." + k_channel_names[c]; }
 }  // namespace
 
@@ -52,8 +48,8 @@ Status quantize_q(Block& b, int k, int c, double step) {
     const double sigma = b.D.col(j).cast<double>().norm();
     const double emax = b.E.rows() ? double(b.E.col(j).cwiseAbs().maxCoeff()) : 0.0;
     const double dmax = b.D.rows() ? double(b.D.col(j).cwiseAbs().maxCoeff()) : 0.0;
-    es[size_t(j)] = safe_step(sigma > 0 ? std::min(4.0, step / sigma) : 4.0, emax);
-    ds[size_t(j)] = safe_step(step, dmax);
+    es[size_t(j)] = quant::safe_step(sigma > 0 ? std::min(4.0, step / sigma) : 4.0, emax);
+    ds[size_t(j)] = quant::safe_step(step, dmax);
   }
   std::vector<float> deq;
   BTFC_ASSIGN_OR_RETURN(Tensor te, quant::encode(tname("E", k, c), {uint64_t(b.E.rows()), uint64_t(C)}, b.E.data(), es, {}, 19, &deq));
@@ -68,7 +64,7 @@ Status quantize_q(Block& b, int k, int c, double step) {
 Status quantize_mean_q(Block& b, int k, int c, double step) {
   const double mx = b.mean.size() ? double(b.mean.cwiseAbs().maxCoeff()) : 0.0;
   std::vector<float> deq;
-  BTFC_ASSIGN_OR_RETURN(Tensor t, quant::encode(tname("mean", k, c), {uint64_t(b.mean.size()), 1}, b.mean.data(), {safe_step(step, mx)}, {}, 19, &deq));
+  BTFC_ASSIGN_OR_RETURN(Tensor t, quant::encode(tname("mean", k, c), {uint64_t(b.mean.size()), 1}, b.mean.data(), {quant::safe_step(step, mx)}, {}, 19, &deq));
   b.mean = Eigen::Map<Eigen::VectorXf>(deq.data(), Index(deq.size()));
   b.coded.push_back(std::move(t));
   return {};
