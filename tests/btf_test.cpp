@@ -114,8 +114,6 @@ TEST(DecodeRequest, ResolvesSubsetsAndRejectsBadOnes) {
   EXPECT_NE(resolve_request(d, q).status().message().find("view index 3"), std::string::npos);
 }
 
-// find_non_finite: first NaN / Inf over many blocks (the parallel, vectorized path), none, and
-// a value in the last partial block.
 TEST(Btf, FitScaleExponentAndTheScaledCopy) {
   // Inside [2^-32, 2^32] nothing is scaled; outside, 2^k brings the peak into [1, 2).
   EXPECT_EQ(btfc::fit_scale_exponent(1.0f), 0);
@@ -148,6 +146,8 @@ TEST(Btf, FitScaleExponentAndTheScaledCopy) {
   EXPECT_EQ(btfc::max_abs(big.data(), big.size()), 3.4e38f);
 }
 
+// find_non_finite: first NaN / Inf over many blocks (the parallel, vectorized path), none, and
+// a value in the last partial block.
 TEST(Btf, FindNonFiniteFindsTheFirstOne) {
   std::vector<float> v((size_t(1) << 16) * 40 + 7, 0.5f);
   EXPECT_EQ(btfc::find_non_finite(v.data(), v.size()), v.size());
