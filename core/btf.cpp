@@ -205,14 +205,15 @@ int fit_scale_exponent(float peak) {
 
 Result<Btf> scaled_copy(const Btf& btf, int k) {
   BTFC_ASSIGN_OR_RETURN(Btf out, Btf::create(btf.desc()));
-  const float* s = btf.data();
-  float* d = out.data();
-  const int64_t n = int64_t(btf.size());
-  // Two factors: 2^k alone passes the float range for |k| > 127 (subnormal peaks).
+  scale_by_pow2(btf.data(), out.data(), btf.size(), k);
+  return out;
+}
+
+void scale_by_pow2(const float* s, float* d, size_t size, int k) {
   const float f1 = std::ldexp(1.0f, k / 2), f2 = std::ldexp(1.0f, k - k / 2);
+  const int64_t n = int64_t(size);
 #pragma omp parallel for schedule(static) if (n > (int64_t(1) << 20))
   for (int64_t i = 0; i < n; ++i) d[i] = s[i] * f1 * f2;
-  return out;
 }
 
 Status Btf::check_finite(const std::string& what) const {

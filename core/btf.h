@@ -151,5 +151,9 @@ float max_abs(const float* v, size_t n);
 int fit_scale_exponent(float peak);
 // A copy of btf with every value times 2^k (exact for normal results).
 Result<Btf> scaled_copy(const Btf& btf, int k);
+// d[i] = s[i] x 2^k for i in [0, n) (d may be s), in two power-of-two factors: 2^k alone passes
+// the float range for |k| > 127 (subnormal peaks). Exact for normal results. Used by scaled_copy
+// and by the codecs that scale their fitted model back.
+void scale_by_pow2(const float* s, float* d, size_t n, int k);
 
 }  // namespace btfc

@@ -338,7 +338,8 @@ class LpcaCodec final : public Codec {
     // in core/btf.h), then the means and weights are scaled back (exact), so it gets its
     // normal-range twin's model (a synthetic BTF times 1e-30 or 1e24: relative L2 0.42 / 0.62
     // instead of 0.31 without). The eigen-BRDFs are unit vectors: no scale.
-    const int k_scale = fit_scale_exponent(max_abs(btf.data(), btf.size()));
+    const float peak = max_abs(btf.data(), btf.size());
+    const int k_scale = fit_scale_exponent(peak);
     Btf scaled;
     if (k_scale != 0) {
       auto copy = scaled_copy(btf, k_scale);
@@ -348,9 +349,11 @@ class LpcaCodec final : public Codec {
     BTFC_ASSIGN_OR_RETURN(FitResult fit, fit_local_pca(k_scale != 0 ? scaled : btf, fo));
     if (k_scale != 0) {
       scaled = Btf();
-      const float back = std::ldexp(1.0f, -k_scale / 2), back2 = std::ldexp(1.0f, -k_scale + k_scale / 2);
-      for (int k = 0; k < fit.clusters; ++k) fit.table.row(Index(k) * (fit.components + 1)) *= back, fit.table.row(Index(k) * (fit.components + 1)) *= back2;
-      fit.weights *= back, fit.weights *= back2;
+      for (int k = 0; k < fit.clusters; ++k) {  // the mean rows; the eigen-BRDFs stay unit vectors
+        auto mean = fit.table.row(Index(k) * (fit.components + 1));
+        scale_by_pow2(mean.data(), mean.data(), size_t(mean.size()), -k_scale);
+      }
+      scale_by_pow2(fit.weights.data(), fit.weights.data(), size_t(fit.weights.size()), -k_scale);
       fit.total_energy = std::ldexp(fit.total_energy, -2 * k_scale);
       for (double& e : fit.sq_error) e = std::ldexp(e, -2 * k_scale);
     }
@@ -426,7 +429,7 @@ class LpcaCodec final : public Codec {
     // ABRDF: past 3.4e38 for values near the largest float, which no float model holds.
     if (!fit.weights.allFinite() || !std::isfinite(err)) {
       char top[32];
-      std::snprintf(top, sizeof top, "%.3g", double(max_abs(btf.data(), btf.size())));
+      std::snprintf(top, sizeof top, "%.3g", double(peak));
       return unsupported(std::string("lpca: the texels' weights overflow float (input values up to ") + top +
                          ", near the largest float 3.4e38): scale the BTF down");
     }
