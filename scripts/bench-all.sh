@@ -19,7 +19,7 @@ OUT=${1:-build/bench-all}
 mkdir -p "$OUT"
 CSV="$OUT/bench.csv"
 rm -f "$CSV"
-specs=(-c fmf:rank=2,4,8,16,32 -c fmf:precision=q:bits=6:rank=16,64,160 -c fmf:color=dfmf:rank=8,16,32 -c lpyr:y=2,4,8 -c lpyr:precision=q:bits=6:y=8,32 -c lpca:clusters=8:components=2,4,8
+specs=(-c fmf:rank=2,4,8,16,32 -c fmf:precision=q:bits=6:rank=16,64,160 -c fmf:color=dfmf:rank=8,16,32 -c fmf:color=dfmf:precision=q:bits=6:rank=16,64,160 -c lpyr:y=2,4,8 -c lpyr:precision=q:bits=6:y=8,32 -c lpca:clusters=8:components=2,4,8
        -c lpca:precision=q:bits=6:components=4,16 -c mlvq -c mlvq:ssim1=0.95:ssim2=0.95)
 SYNTH=("$BTFC" -q --force synth --width 64 --height 64 -o "$OUT/synthetic-64.btfc")
 "${SYNTH[@]}"

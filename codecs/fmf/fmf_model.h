@@ -79,9 +79,7 @@ class FmfModel final : public Model {
   FmfModel(BtfDesc desc, std::string spec, Config cfg, std::vector<Block> blocks)
       : m_desc(std::move(desc)), m_spec(std::move(spec)), m_cfg(cfg), m_blocks(std::move(blocks)),
         m_light_interp(m_desc.lights), m_view_interp(m_desc.views) {
-    if (m_cfg.quant.bits > 0)
-      for (Block& b : m_blocks)
-        if (b.coded.empty()) quantize_block(b);
+    if (m_cfg.quant.bits > 0) quantize_blocks();
   }
 
   const BtfDesc& desc() const override { return m_desc; }
@@ -155,14 +153,9 @@ class FmfModel final : public Model {
 
   // precision=q: U and SxV become their zq tensors and the values those decode to
   // (codecs/fmf/fmf_quant.h); the eigen-textures are width x height images for textures=dct.
-  void quantize_block(Block& b) {
-    fmf::QuantConfig qc = m_cfg.quant;
-    qc.centred = m_cfg.dfmf && b.name == "y";  // log luminance (fmf_quant.h)
-    fmf::QuantizedFactors q = fmf::quantize_factors(b.name, b.U, b.SxV, qc, m_desc.width, m_desc.height);
-    if (!q.status.ok()) m_quant_status = q.status;
-    b.U = std::move(q.U), b.SxV = std::move(q.SxV), b.coded = std::move(q.coded);
-    b.scale = Eigen::VectorXf::Ones(b.SxV.cols());
-  }
+  // Blocks not yet coded (a loaded model's are) are quantized on two threads (fmf_model.cpp).
+  void quantize_blocks();
+  Status quantize_block(Block& b) const;
   Status m_quant_status;  // a failed quantize_block: save() reports it
 
   // The C++ throughput path of eval_batch (rgb mode, validated queries; fmf_eval.cpp), and the
