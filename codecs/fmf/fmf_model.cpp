@@ -166,8 +166,8 @@ Status FmfModel::quantize_block(Block& b) const {
 void FmfModel::quantize_blocks() {
   // Each block's SxV is one single-threaded zstd call (level 19; its U, a few rows, runs beside
   // it): most of a q encode's time. color=dfmf's three blocks go to two threads, each taking the
-  // next block in order (y on one, u then v on the other: 8.5 -> ~4.5 s on the 256 x 256
-  // texels of the UBO2003 slice at rank 64), at most two eigen-texture coders (<= 81 MB each)
+  // next block in order (y on one, u then v on the other; the UBO2003 slice's 256 x 256 texels
+  // at rank 64: encode 11.4 -> 5.8-6.4 s), at most two eigen-texture coders (<= 81 MB each)
   // alive. The same bytes either way.
   std::vector<Status> status(m_blocks.size());
   std::atomic<size_t> next{0};
