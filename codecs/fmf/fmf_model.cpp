@@ -175,8 +175,9 @@ void FmfModel::quantize_blocks() {
     for (size_t i; (i = next++) < m_blocks.size();)
       if (m_blocks[i].coded.empty()) status[i] = quantize_block(m_blocks[i]);
   };
+  const auto todo = std::count_if(m_blocks.begin(), m_blocks.end(), [](const Block& b) { return b.coded.empty(); });
   std::future<void> other;
-  if (m_blocks.size() > 1) {
+  if (todo > 1) {  // not for rgb's one block, nor for a loaded model's coded ones
     try {
       other = std::async(std::launch::async, work);
     } catch (const std::system_error&) {  // no thread to be had: this one does them all
