@@ -71,6 +71,14 @@ struct KeptRandomized {
 int g_randomized_scopes = 0, g_randomized_rank = 0;
 size_t g_randomized_computed = 0, g_randomized_served = 0;
 std::unique_ptr<KeptRandomized> g_kept_randomized;
+// RandomizedSvdReuse::serve_set's store: one set of factorizations with the ranks they were
+// computed for.
+struct KeptSet {
+  uint64_t key = 0;
+  std::vector<int> ranks;
+  RandomizedSvdReuse::Set set;
+};
+std::unique_ptr<KeptSet> g_kept_set;
 
 // All eigenpairs, sorted by descending eigenvalue (the power scheme's small Rayleigh-Ritz step).
 void sorted_eigen(const MatrixXd& G, Eigen::VectorXd& lambda, MatrixXd& vecs) { top_eigenpairs(G, G.rows(), lambda, vecs); }
@@ -845,7 +853,71 @@ RandomizedSvdReuse::RandomizedSvdReuse(int max_rank) {
 
 RandomizedSvdReuse::~RandomizedSvdReuse() {
   std::lock_guard<std::mutex> lock(g_reuse_mutex);
-  if (--g_randomized_scopes == 0) g_kept_randomized.reset(), g_randomized_rank = 0;
+  if (--g_randomized_scopes == 0) g_kept_randomized.reset(), g_kept_set.reset(), g_randomized_rank = 0;
+}
+
+uint64_t data_fingerprint(const float* data, size_t n) {
+  ConstMapF map(data, Index(n), 1);
+  return fingerprint(map);
+}
+
+namespace {
+
+RandomizedSvdReuse::Set leading_set(const RandomizedSvdReuse::Set& s, const std::vector<int>& ranks) {
+  RandomizedSvdReuse::Set t;
+  t.extra = s.extra;
+  for (size_t i = 0; i < s.r.size(); ++i) t.r.push_back(leading(s.r[i], ranks[i]));
+  return t;
+}
+
+}  // namespace
+
+Result<RandomizedSvdReuse::Set> RandomizedSvdReuse::serve_set(uint64_t key, const std::vector<int>& ranks,
+                                                              const std::function<bool(int)>& randomized_at,
+                                                              const std::function<Result<Set>(const std::vector<int>&)>& compute) {
+  std::vector<int> big;
+  {
+    std::lock_guard<std::mutex> lock(g_reuse_mutex);
+    if (g_randomized_scopes == 0) return compute(ranks);
+    const KeptSet* k = g_kept_set && g_kept_set->key == key && g_kept_set->ranks.size() == ranks.size() ? g_kept_set.get() : nullptr;
+    bool covered = k != nullptr;
+    for (size_t i = 0; covered && i < ranks.size(); ++i) covered = k->ranks[i] >= ranks[i];
+    if (covered) {
+      ++g_randomized_served;
+      return leading_set(k->set, ranks);
+    }
+    for (size_t i = 0; i < ranks.size(); ++i) {
+      const int kept = k ? k->ranks[i] : 0;
+      big.push_back(kept >= ranks[i] ? kept
+                                     : std::max(ranks[i], std::min(g_randomized_rank, (std::max(2 * ranks[i], 2 * kept) + 63) / 64 * 64)));
+    }
+  }
+  for (size_t i = 0; i < big.size(); ++i) {  // the largest accepted rank in [ranks[i], big[i]]
+    int lo = std::min(ranks[i], big[i]), hi = big[i];
+    while (lo < hi) {
+      const int mid = lo + (hi - lo + 1) / 2;
+      if (randomized_at(mid))
+        lo = mid;
+      else
+        hi = mid - 1;
+    }
+    big[i] = lo;
+  }
+  BTFC_ASSIGN_OR_RETURN(Set computed, compute(big));
+  std::lock_guard<std::mutex> lock(g_reuse_mutex);
+  ++g_randomized_computed, ++g_randomized_served;
+  Set t = leading_set(computed, ranks);
+  if (g_randomized_scopes > 0) {
+    auto k = std::make_unique<KeptSet>();
+    k->key = key, k->ranks = std::move(big), k->set = std::move(computed);
+    g_kept_set = std::move(k);
+  }
+  return t;
+}
+
+bool RandomizedSvdReuse::active() {
+  std::lock_guard<std::mutex> lock(g_reuse_mutex);
+  return g_randomized_scopes > 0;
 }
 
 size_t RandomizedSvdReuse::computed() {

@@ -29,6 +29,7 @@
 #include <Eigen/Core>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -214,8 +215,31 @@ class RandomizedSvdReuse {
   ~RandomizedSvdReuse();
   RandomizedSvdReuse(const RandomizedSvdReuse&) = delete;
   RandomizedSvdReuse& operator=(const RandomizedSvdReuse&) = delete;
+  static bool active();      // a scope is alive
   static size_t computed();  // randomized SVDs the scopes computed (tests)
   static size_t served();    // truncations they served, computed ones included (tests)
+
+  // Several matrices factorized together outside truncated_svd (fmf's color=dfmf stream: its
+  // three channel matrices in one pass over the data, codecs/fmf). Inside a scope, the leading
+  // ranks[i] components of the kept set of the same key (the caller's fingerprint of its data
+  // and options) when each kept matrix was computed at ranks[i] or more; else compute() at grown
+  // ranks (per matrix as above: a rank that is not covered grows to twice itself or the kept
+  // one, rounded up to 64, at most the scope's rank and at most the largest rank that
+  // randomized_at accepts; a covered one keeps the kept rank), kept for the next request. Why:
+  // a dfmf byte-budget search on a large BTF encoded every probe from scratch (minutes for one
+  // search at UBO2003 size). Outside a scope, compute(ranks) alone. `extra` is the caller's
+  // figure for the set, kept with it (dfmf: the clamped values' count). One set kept per scope;
+  // it counts in computed() / served() as one factorization. Not for concurrent searches.
+  struct Set {
+    std::vector<SvdResult> r;
+    double extra = 0;
+  };
+  static Result<Set> serve_set(uint64_t key, const std::vector<int>& ranks, const std::function<bool(int)>& randomized_at,
+                               const std::function<Result<Set>(const std::vector<int>&)>& compute);
 };
+
+// A 64-bit fingerprint of n floats (their bits), in parallel blocks (~0.05 s for 300 MB): the
+// reuse scopes' key for "the same data".
+uint64_t data_fingerprint(const float* data, size_t n);
 
 }  // namespace btfc

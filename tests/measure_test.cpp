@@ -225,6 +225,44 @@ TEST(Target, FmfByteBudgetProbesShareRandomizedFactorizations) {
   EXPECT_LE(ex->rel_l2, 1.002 * ey->rel_l2);
 }
 
+TEST(Target, DfmfByteBudgetProbesShareStreamedFactorizations) {
+  // color=dfmf factorizes its three channel matrices in one stream (dfmf_streaming_svds), not
+  // through truncated_svd: in a byte-budget search its probes take the leading components of a
+  // few such streams of growing rank (RandomizedSvdReuse::serve_set, core/svd.h) instead of one
+  // stream each. 40 x 40 texels: randomized below rank 184. The chosen model fits and is at
+  // least as accurate as its spec encoded alone.
+  const Btf b = small_btf(40, 40);
+  Context ctx;
+  const size_t computed0 = RandomizedSvdReuse::computed(), served0 = RandomizedSvdReuse::served();
+  const double budget = 4e5;  // about rank 20 per channel with 8-bit factors
+  auto c = choose_for_target(b, "fmf:color=dfmf:precision=q:bits=8", Target{Target::Kind::max_bytes, budget}, ctx);
+  ASSERT_TRUE(c.ok()) << c.status().message();
+  const size_t computed = RandomizedSvdReuse::computed() - computed0, served = RandomizedSvdReuse::served() - served0;
+  std::printf("chose %s (%.0f bytes, %.2f dB) after %zu probes: %zu streams served %zu of them\n", c->spec.c_str(), c->measure, c->psnr,
+              c->probes.size(), computed, served);
+  EXPECT_LE(c->measure, budget);
+  EXPECT_GE(c->knob_value, 16);
+  std::string svd_y;
+  for (const auto& [k, v] : c->model->stats().notes)
+    if (k == "svd.y") svd_y = v;
+  EXPECT_EQ(svd_y.rfind("randomized", 0), 0u) << svd_y;
+  EXPECT_EQ(served, c->probes.size()) << "every probe through the kept streams";
+  EXPECT_GE(served, 3u);
+  EXPECT_LE(2 * computed, served) << "at least two probes per stream";
+  Btf x, y;
+  ASSERT_NO_FATAL_FAILURE(decode_chosen_and_alone(b, *c, ctx, x, y));
+  auto ex = compare_btf(b, x, false), ey = compare_btf(b, y, false);
+  ASSERT_TRUE(ex.ok() && ey.ok());
+  std::printf("searched model %.6f, alone %.6f relative L2\n", ex->rel_l2, ey->rel_l2);
+  EXPECT_LE(ex->rel_l2, 1.002 * ey->rel_l2);
+  // Outside a search nothing is kept or served.
+  const size_t served1 = RandomizedSvdReuse::served();
+  auto again = resolve_spec(c->spec);
+  ASSERT_TRUE(again.ok());
+  ASSERT_TRUE(again->first->encode(b, again->second, ctx).ok());
+  EXPECT_EQ(RandomizedSvdReuse::served(), served1);
+}
+
 TEST(Target, FmfByteBudgetReachesAnyRankWhereTheExactSvdServesAll) {
   // A matrix whose small side is <= 4096 is factorized exactly at one cost for every rank
   // (core/svd.h), so fmf's budget limit is a quarter of that side, and the search computes the

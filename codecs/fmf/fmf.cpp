@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <limits>
 
 #include "codecs/fmf/fmf_model.h"
@@ -236,9 +237,39 @@ class FmfCodec final : public Codec {
         // Not for target_error, whose search compares decodes against the input.
         const MatrixChunks src(btf.data(), d.abrdf_size(), n, std::max<size_t>(1, (size_t(64) << 20) / d.abrdf_size()));
         float* const scratch = ctx.consumable == &btf && !dfmf_target ? ctx.consumable->data() : nullptr;
-        Collective one;
-        double cl = 0;
-        auto r = dfmf_streaming_svds(src, owned_chunks(src, 0, 1), offset, oc[0], oc[1], one, nullptr, 0, &cl, scratch);
+        auto stream = [&](const std::vector<int>& rk) -> Result<RandomizedSvdReuse::Set> {
+          SvdOptions oy = oc[0], oca = oc[1];
+          oy.max_rank = rk[0], oca.max_rank = std::max(rk[1], rk[2]);
+          Collective one;
+          double cl = 0;
+          BTFC_ASSIGN_OR_RETURN(std::vector<SvdResult> rs,
+                                dfmf_streaming_svds(src, owned_chunks(src, 0, 1), offset, oy, oca, one, nullptr, 0, &cl, scratch));
+          return RandomizedSvdReuse::Set{std::move(rs), cl};
+        };
+        // In a byte-budget search (a RandomizedSvdReuse scope) the probes take the leading
+        // components of a few streams at growing ranks (svd.h), keyed by the data's fingerprint
+        // (a read of the BTF, so only there), the offset and the SVD options; not when the
+        // stream converts the input in place.
+        Result<RandomizedSvdReuse::Set> r = unsupported("");
+        const std::vector<int> want{ranks[0], ranks[1], ranks[2]};
+        if (scratch || !RandomizedSvdReuse::active()) {
+          r = stream(want);
+        } else {
+          uint32_t offset_bits;
+          std::memcpy(&offset_bits, &offset, 4);
+          const SvdOptions& o = oc[0];
+          uint64_t key = data_fingerprint(btf.data(), btf.size());
+          for (const uint64_t v :
+               {uint64_t(offset_bits), uint64_t(rows), uint64_t(n), uint64_t(o.oversample), uint64_t(o.power_iters), uint64_t(o.scheme),
+                uint64_t(o.seed), uint64_t(o.sparse_sketch), uint64_t(o.sketch_sums), uint64_t(o.method)})
+            key = (key ^ v) * 0x100000001B3ull, key ^= key >> 31;
+          auto randomized_at = [&](int rank) {
+            SvdOptions t = o;
+            t.max_rank = rank;
+            return resolved_method(rows, n, t) == SvdMethod::randomized;
+          };
+          r = RandomizedSvdReuse::serve_set(key, want, randomized_at, stream);
+        }
         if (!r.ok() && r.status().code() == StatusCode::corrupt_data) {
           // A non-finite value (ooc_svd.h): named where the input is intact, else (converted in
           // place in the first pass) its texel.
@@ -248,12 +279,12 @@ class FmfCodec final : public Codec {
                                 std::to_string(i / d.abrdf_size() / size_t(d.width)) +
                                 ") (a NaN or infinity, or finite values whose luminance + offset pass the float range, 3.4e38)");
         }
-        BTFC_ASSIGN_OR_RETURN(std::vector<SvdResult> rs, std::move(r));
+        BTFC_ASSIGN_OR_RETURN(RandomizedSvdReuse::Set rs, std::move(r));
         for (int k = 0; k < 3; ++k) {
-          BTFC_ASSIGN_OR_RETURN(Block b, block_from_svd(names[k], std::move(rs[k]), cfg.half, ranks[k], 0, stats));
+          BTFC_ASSIGN_OR_RETURN(Block b, block_from_svd(names[k], std::move(rs.r[k]), cfg.half, ranks[k], 0, stats));
           blocks.push_back(std::move(b));
         }
-        clamped = size_t(cl);
+        clamped = size_t(rs.extra);
       } else {
         // Exact (small direction sets): one decorrelated channel matrix at a time, peak memory
         // input + 1/3 input. A PageBuffer (huge pages requested, not zeroed): every value is
