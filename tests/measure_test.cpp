@@ -182,6 +182,17 @@ void decode_chosen_and_alone(const Btf& b, const TargetChoice& c, Context& ctx, 
   ASSERT_TRUE(m.value()->decode_all(y).ok());
 }
 
+// A model chosen by a search whose probes shared factorizations (RandomizedSvdReuse) is as close
+// to the data as its spec encoded alone (within 0.2 %) or closer.
+void expect_searched_as_accurate_as_alone(const Btf& b, const TargetChoice& c, Context& ctx) {
+  Btf x, y;
+  ASSERT_NO_FATAL_FAILURE(decode_chosen_and_alone(b, c, ctx, x, y));
+  auto ex = compare_btf(b, x, false), ey = compare_btf(b, y, false);
+  ASSERT_TRUE(ex.ok() && ey.ok());
+  std::printf("searched model %.6f, alone %.6f relative L2\n", ex->rel_l2, ey->rel_l2);
+  EXPECT_LE(ex->rel_l2, 1.002 * ey->rel_l2);
+}
+
 TEST(Target, FmfByteBudgetLimitIsAQuarterOfTheSmallSideUpTo1024) {
   // fmf's budget limit: a quarter of the matrix's small side, at most 1024 where the SVD is
   // randomized (small side > 4096), and at least one rank per 64 texels.
@@ -217,12 +228,7 @@ TEST(Target, FmfByteBudgetProbesShareRandomizedFactorizations) {
   EXPECT_TRUE(randomized) << "the chosen rank is below the exact path's";
   EXPECT_GE(served, 4u);
   EXPECT_LE(2 * computed, served) << "at least two probes per factorization";
-  Btf x, y;
-  ASSERT_NO_FATAL_FAILURE(decode_chosen_and_alone(b, *c, ctx, x, y));
-  auto ex = compare_btf(b, x, false), ey = compare_btf(b, y, false);
-  ASSERT_TRUE(ex.ok() && ey.ok());
-  std::printf("searched model %.6f, alone %.6f relative L2\n", ex->rel_l2, ey->rel_l2);
-  EXPECT_LE(ex->rel_l2, 1.002 * ey->rel_l2);
+  expect_searched_as_accurate_as_alone(b, *c, ctx);
 }
 
 TEST(Target, DfmfByteBudgetProbesShareStreamedFactorizations) {
@@ -249,12 +255,7 @@ TEST(Target, DfmfByteBudgetProbesShareStreamedFactorizations) {
   EXPECT_EQ(served, c->probes.size()) << "every probe through the kept streams";
   EXPECT_GE(served, 3u);
   EXPECT_LE(2 * computed, served) << "at least two probes per stream";
-  Btf x, y;
-  ASSERT_NO_FATAL_FAILURE(decode_chosen_and_alone(b, *c, ctx, x, y));
-  auto ex = compare_btf(b, x, false), ey = compare_btf(b, y, false);
-  ASSERT_TRUE(ex.ok() && ey.ok());
-  std::printf("searched model %.6f, alone %.6f relative L2\n", ex->rel_l2, ey->rel_l2);
-  EXPECT_LE(ex->rel_l2, 1.002 * ey->rel_l2);
+  expect_searched_as_accurate_as_alone(b, *c, ctx);
   // Outside a search nothing is kept or served.
   const size_t served1 = RandomizedSvdReuse::served();
   auto again = resolve_spec(c->spec);
