@@ -761,6 +761,22 @@ SvdResult leading(const SvdResult& r, int rank) {
   return t;
 }
 
+// The rank a reuse scope computes for a request of rank r: twice the request, and at least twice
+// the kept one (the ranks computed in a search grow geometrically, so together they cost about
+// two of the largest), rounded up to 64, at most the scope's rank, then the largest rank up to
+// that which `randomized` accepts (the automatic choice still factorizes it randomized; r's is).
+int grown_rank(int r, int kept, int scope_rank, const std::function<bool(int)>& randomized) {
+  int lo = r, hi = std::max(r, std::min(scope_rank, (std::max(2 * r, 2 * kept) + 63) / 64 * 64));
+  while (lo < hi) {
+    const int mid = lo + (hi - lo + 1) / 2;
+    if (randomized(mid))
+      lo = mid;
+    else
+      hi = mid - 1;
+  }
+  return lo;
+}
+
 // RandomizedSvdReuse (svd.h): the kept factorization's leading components when it matches,
 // else a new one at the scope's rank for this request, kept when larger; null outside a scope.
 Result<std::optional<SvdResult>> reused_randomized(ConstMapF& B, const SvdOptions& opt) {
@@ -786,17 +802,12 @@ Result<std::optional<SvdResult>> reused_randomized(ConstMapF& B, const SvdOption
       }
     }
   }
-  // Twice the request, and at least twice the kept one: the ranks computed in a search grow
-  // geometrically, so together they cost about two of the largest.
   SvdOptions big = opt;
-  big.max_rank = std::min(scope_rank, (std::max(2 * opt.max_rank, 2 * kept_rank) + 63) / 64 * 64);
-  // At most the largest rank that the automatic choice still factorizes randomized (opt's is).
-  for (int lo = opt.max_rank, hi = big.max_rank; lo < hi;) {
-    big.max_rank = lo + (hi - lo + 1) / 2;
-    if (resolved_method(size_t(B.rows()), size_t(B.cols()), big) == SvdMethod::randomized) lo = big.max_rank;
-    else hi = big.max_rank - 1;
-    big.max_rank = lo;
-  }
+  big.max_rank = grown_rank(opt.max_rank, kept_rank, scope_rank, [&](int rank) {
+    SvdOptions t = opt;
+    t.max_rank = rank;
+    return resolved_method(size_t(B.rows()), size_t(B.cols()), t) == SvdMethod::randomized;
+  });
   BTFC_ASSIGN_OR_RETURN(SvdResult r, randomized_svd(B, big));
   std::lock_guard<std::mutex> lock(g_reuse_mutex);
   ++g_randomized_computed, ++g_randomized_served;
@@ -875,7 +886,8 @@ RandomizedSvdReuse::Set leading_set(const RandomizedSvdReuse::Set& s, const std:
 Result<RandomizedSvdReuse::Set> RandomizedSvdReuse::serve_set(uint64_t key, const std::vector<int>& ranks,
                                                               const std::function<bool(int)>& randomized_at,
                                                               const std::function<Result<Set>(const std::vector<int>&)>& compute) {
-  std::vector<int> big;
+  std::vector<int> big;  // the kept ranks, then the ranks to compute
+  int scope_rank = 0;
   {
     std::lock_guard<std::mutex> lock(g_reuse_mutex);
     if (g_randomized_scopes == 0) return compute(ranks);
@@ -886,23 +898,11 @@ Result<RandomizedSvdReuse::Set> RandomizedSvdReuse::serve_set(uint64_t key, cons
       ++g_randomized_served;
       return leading_set(k->set, ranks);
     }
-    for (size_t i = 0; i < ranks.size(); ++i) {
-      const int kept = k ? k->ranks[i] : 0;
-      big.push_back(kept >= ranks[i] ? kept
-                                     : std::max(ranks[i], std::min(g_randomized_rank, (std::max(2 * ranks[i], 2 * kept) + 63) / 64 * 64)));
-    }
+    for (size_t i = 0; i < ranks.size(); ++i) big.push_back(k ? k->ranks[i] : 0);
+    scope_rank = g_randomized_rank;
   }
-  for (size_t i = 0; i < big.size(); ++i) {  // the largest accepted rank in [ranks[i], big[i]]
-    int lo = std::min(ranks[i], big[i]), hi = big[i];
-    while (lo < hi) {
-      const int mid = lo + (hi - lo + 1) / 2;
-      if (randomized_at(mid))
-        lo = mid;
-      else
-        hi = mid - 1;
-    }
-    big[i] = lo;
-  }
+  for (size_t i = 0; i < big.size(); ++i)  // a covered matrix keeps its kept rank
+    if (big[i] < ranks[i]) big[i] = grown_rank(ranks[i], big[i], scope_rank, randomized_at);
   BTFC_ASSIGN_OR_RETURN(Set computed, compute(big));
   std::lock_guard<std::mutex> lock(g_reuse_mutex);
   ++g_randomized_computed, ++g_randomized_served;
