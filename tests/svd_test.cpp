@@ -741,6 +741,59 @@ TEST(Svd, RandomizedReuseServesTheLeadingComponentsOfALargerFactorization) {
   EXPECT_EQ(RandomizedSvdReuse::computed() - computed0, 2u);
 }
 
+TEST(Svd, InASearchARandomizedRankIsProjectedFromTheKeptExactGram) {
+  // A byte-budget search holds both scopes. Once a probe's rank was factorized exactly (its Gram
+  // eigenpairs kept, ExactSvdReuse), a later probe whose rank the automatic choice factorizes
+  // randomized, and which the kept randomized factorization does not cover, is served by the
+  // exact path from those eigenpairs (a projection: no randomized SVD). The result is the exact
+  // SVD at that rank, bit for bit.
+  const size_t m = 1300, n = 1100;  // small side 1100: randomized at rank 32, exact from rank 122
+  const std::vector<float> b = test_matrix(m, n, 60, 4);
+  SvdOptions exact;
+  exact.method = SvdMethod::exact;
+  exact.max_rank = 100;
+  auto plain100 = truncated_svd(b.data(), m, n, exact);  // no scope
+  ASSERT_TRUE(plain100.ok());
+  SvdOptions o;  // automatic, as fmf's probes ask
+  o.truncation_ok = true;
+  const size_t reuses0 = ExactSvdReuse::reuses(), computed0 = RandomizedSvdReuse::computed();
+  {
+    const ExactSvdReuse keep_gram;
+    const RandomizedSvdReuse keep_randomized(512);
+    o.max_rank = 32;  // no exact probe yet: randomized, kept at rank 64 (grown_rank)
+    auto first = truncated_svd(b.data(), m, n, o);
+    ASSERT_TRUE(first.ok());
+    EXPECT_EQ(first->method, "randomized");
+    EXPECT_EQ(RandomizedSvdReuse::computed() - computed0, 1u);
+    o.max_rank = 300;  // resolved exact: its Gram eigenpairs are kept
+    auto high = truncated_svd(b.data(), m, n, o);
+    ASSERT_TRUE(high.ok());
+    EXPECT_EQ(high->method, "exact");
+    o.max_rank = 100;  // randomized by the automatic choice, above the kept randomized rank
+    ASSERT_EQ(resolved_method(m, n, o), SvdMethod::randomized);
+    auto r100 = truncated_svd(b.data(), m, n, o);
+    ASSERT_TRUE(r100.ok());
+    EXPECT_EQ(r100->method, "exact");
+    EXPECT_EQ(ExactSvdReuse::reuses() - reuses0, 1u) << "served from the kept eigenpairs";
+    EXPECT_EQ(RandomizedSvdReuse::computed() - computed0, 1u) << "no randomized SVD for it";
+    EXPECT_EQ(r100->U, plain100->U);  // the exact SVD
+    EXPECT_EQ(r100->SxV, plain100->SxV);
+    o.max_rank = 40;  // covered by the kept randomized factorization: served from it, as before
+    auto r32 = truncated_svd(b.data(), m, n, o);
+    ASSERT_TRUE(r32.ok());
+    EXPECT_EQ(r32->method, "randomized");
+    o.method = SvdMethod::randomized, o.max_rank = 100;  // asked for by name: randomized
+    auto named = truncated_svd(b.data(), m, n, o);
+    ASSERT_TRUE(named.ok());
+    EXPECT_EQ(named->method, "randomized");
+    EXPECT_EQ(ExactSvdReuse::reuses() - reuses0, 1u);
+    o.method = SvdMethod::automatic;
+  }
+  auto after = truncated_svd(b.data(), m, n, o);  // the scopes are gone: the automatic choice again
+  ASSERT_TRUE(after.ok());
+  EXPECT_EQ(after->method, "randomized");
+}
+
 TEST(Svd, ReuseServesAnExactSvdAgainAtAnotherRankWithTheSameResult) {
   const size_t m = 300, n = 200;
   const std::vector<float> b = test_matrix(m, n, 20, 5);
