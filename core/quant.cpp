@@ -6,6 +6,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <memory>
+#include <string>
 
 #include "core/dct.h"
 
@@ -132,6 +134,35 @@ void dequantize(const Header& h, const int32_t* q, const float* steps, float* ou
   }
 }
 
+// One zstd frame of the planes. Planes of k_two_jobs_from bytes or more (fmf's factors at ranks
+// in the hundreds: 25-40 MB) are compressed as two jobs of half the planes each on two zstd
+// workers, the second reloading the last quarter window of the first (ZSTD_c_overlapLog 7): at
+// level 19 one such call took 6-8.5 s on one core and was most of a byte-budget probe's time at
+// large ranks; two jobs took 4.2-5 s for 0.1-0.2 % more bytes (25 and 31 MB of 6-bit planes,
+// docs/benchmarks.md). The jobs depend on the size only, so the bytes are the same on every
+// machine; readers see an ordinary frame. A libzstd without threads: one job, as below.
+constexpr size_t k_two_jobs_from = size_t(8) << 20;
+Result<size_t> compress_planes(const std::vector<uint8_t>& planes, int level, std::vector<uint8_t>& z) {
+  if (planes.size() < k_two_jobs_from) {
+    const size_t zn = ZSTD_compress(z.data(), z.size(), planes.data(), planes.size(), level);
+    if (ZSTD_isError(zn)) return codec_error(std::string("zstd: ") + ZSTD_getErrorName(zn));
+    return zn;
+  }
+  std::unique_ptr<ZSTD_CCtx, size_t (*)(ZSTD_CCtx*)> cctx(ZSTD_createCCtx(), ZSTD_freeCCtx);
+  if (!cctx) return codec_error("zstd: no compression context");
+  ZSTD_CCtx* c = cctx.get();
+  const size_t job = (planes.size() / 2 + (size_t(1) << 20) - 1) >> 20 << 20;  // half, rounded up to 1 MiB
+  if (ZSTD_isError(ZSTD_CCtx_setParameter(c, ZSTD_c_compressionLevel, level)))
+    return codec_error("zstd: compression level " + std::to_string(level) + " refused");
+  if (!ZSTD_isError(ZSTD_CCtx_setParameter(c, ZSTD_c_nbWorkers, 2))) {
+    ZSTD_CCtx_setParameter(c, ZSTD_c_jobSize, int(job));
+    ZSTD_CCtx_setParameter(c, ZSTD_c_overlapLog, 7);
+  }
+  const size_t zn = ZSTD_compress2(c, z.data(), z.size(), planes.data(), planes.size());
+  if (ZSTD_isError(zn)) return codec_error(std::string("zstd: ") + ZSTD_getErrorName(zn));
+  return zn;
+}
+
 }  // namespace
 
 Status check_header(const uint8_t* data, uint64_t data_bytes, const std::vector<uint64_t>& shape, const std::string& what) {
@@ -181,8 +212,9 @@ Result<Tensor> encode(std::string name, std::vector<uint64_t> shape, const float
     for (uint32_t b = 0; b < h.byte_width; ++b)
       for (uint64_t i = 0; i < h.coeff_rows; ++i) *o++ = uint8_t(zigzag(q[k * h.coeff_rows + i]) >> (8 * b));
   std::vector<uint8_t> z(ZSTD_compressBound(planes.size()));
-  const size_t zn = ZSTD_compress(z.data(), z.size(), planes.data(), planes.size(), zstd_level);
-  if (ZSTD_isError(zn)) return codec_error(what + ": zstd: " + ZSTD_getErrorName(zn));
+  const Result<size_t> compressed = compress_planes(planes, zstd_level, z);
+  if (!compressed.ok()) return codec_error(what + ": " + compressed.status().message());
+  const size_t zn = compressed.value();
   Tensor t;
   t.name = std::move(name);
   t.dtype = DType::zq;

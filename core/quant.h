@@ -61,7 +61,8 @@ struct Layout {
 // Quantizes a row-major [rows, K] float array with the K steps (each finite and > 0) and returns
 // the zq tensor. `dequantized` (optional, rows * K floats) receives the values decode gives back.
 // invalid_argument for bad steps, non-finite values, integers beyond +-2^30, or a dct layout
-// whose size disagrees with rows.
+// whose size disagrees with rows. Planes of 8 MiB or more are compressed as two zstd jobs on two
+// worker threads (one ordinary frame; the same bytes on every machine).
 Result<Tensor> encode(std::string name, std::vector<uint64_t> shape, const float* values, const std::vector<float>& steps,
                       const Layout& layout, int zstd_level = 19, std::vector<float>* dequantized = nullptr);
 

@@ -2,6 +2,7 @@
 // exact integers, error bounded by the step, the DCT layout, hostile payloads and files, the
 // equal-error step rule, and fmf models that save and load to the same values.
 #include <gtest/gtest.h>
+#include <zstd.h>
 
 #include <cmath>
 #include <cstdio>
@@ -67,6 +68,42 @@ TEST(Quant, IntegersExactAndErrorWithinHalfAStep) {
     }
   // Coarse columns cost fewer bytes: a 3.0 step on unit values is almost all zeros.
   EXPECT_LT(t->bytes.size(), rows * K * 2);
+}
+
+TEST(Quant, LargePlanesAreTwoZstdJobsWithTheSameBytesEveryTime) {
+  // Planes of 8 MiB or more are compressed as two zstd jobs on two workers (core/quant.cpp,
+  // compress_planes): an ordinary frame that decodes to the same integers, the same bytes on
+  // every call (the jobs depend on the size only), and within 1 % of one job's size.
+  const size_t rows = size_t(1) << 20, K = 9;  // 9 MiB of one-byte planes
+  std::vector<float> v = random_values(rows * K, 6.0, 7);
+  const std::vector<float> steps(K, 1.0f);
+  const int level = 3;  // the path is the same at every level; 19 would take seconds here
+  auto a = quant::encode("big", {rows, K}, v.data(), steps, {}, level);
+  auto b = quant::encode("big", {rows, K}, v.data(), steps, {}, level);
+  ASSERT_TRUE(a.ok() && b.ok());
+  EXPECT_EQ(a->bytes, b->bytes);
+  auto d = quant::decode_ints(a.value(), "big");
+  ASSERT_TRUE(d.ok()) << d.status().message();
+  for (size_t i = 0; i < rows * K; i += 4097) EXPECT_EQ(d->q[(i % K) * rows + i / K], int32_t(std::round(double(v[i])))) << i;
+  // The frame after the header (32 bytes) and the steps, against one job of the same planes.
+  const size_t head = 32 + 4 * K;
+  std::vector<uint8_t> planes(rows * K);
+  for (size_t k = 0; k < K; ++k)
+    for (size_t r = 0; r < rows; ++r) {
+      const int32_t q = int32_t(std::round(double(v[r * K + k])));
+      planes[k * rows + r] = uint8_t((uint32_t(q) << 1) ^ uint32_t(q >> 31));
+    }
+  std::vector<uint8_t> one(ZSTD_compressBound(planes.size()));
+  const size_t n1 = ZSTD_compress(one.data(), one.size(), planes.data(), planes.size(), level);
+  ASSERT_FALSE(ZSTD_isError(n1));
+  one.resize(n1);
+  const std::vector<uint8_t> two(a->bytes.begin() + ptrdiff_t(head), a->bytes.end());
+  std::vector<uint8_t> back(planes.size());
+  ASSERT_EQ(ZSTD_decompress(back.data(), back.size(), two.data(), two.size()), planes.size());
+  EXPECT_EQ(back, planes);
+  EXPECT_NE(two, one) << "compressed as one job";
+  std::printf("two jobs %zu bytes, one job %zu\n", two.size(), one.size());
+  EXPECT_LE(double(two.size()), 1.01 * double(one.size()));
 }
 
 TEST(Quant, MeanSquaredErrorIsStepSquaredOverTwelve) {

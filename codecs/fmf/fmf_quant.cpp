@@ -50,9 +50,10 @@ QuantizedFactors quantize_factors(const std::string& name, const MatrixXfR& U, c
   const uint64_t C = uint64_t(U.cols());
   quant::Layout L;
   if (cfg.dct) L.dct = true, L.width = uint32_t(width), L.height = uint32_t(height);
-  // The two tensors on two threads: each quant::encode is one single-threaded zstd (level 19)
-  // call, most of an encode's time after the SVD (30 % of a `--max-bytes` search's on the
-  // textile, perf), and the other core idled through it. Same bytes either way.
+  // The two tensors on two threads: each quant::encode is one zstd (level 19) call, most of an
+  // encode's time after the SVD (30 % of a `--max-bytes` search's on the textile, perf), and the
+  // other core idled through it. Same bytes either way. (A tensor of 8 MiB of planes or more is
+  // itself two zstd jobs on two workers, core/quant.h: U at ranks in the hundreds.)
   std::vector<float> deq_u, deq_s;
   auto encode_s = [&] { return quant::encode("SxV." + name, {uint64_t(SxV.rows()), C}, SxV.data(), ss, L, 19, &deq_s); };
   std::future<Result<Tensor>> pending;
