@@ -162,36 +162,53 @@ __kernel void fmf_decode_rgb(__global const float* Ut, __global const float* SX,
 }
 
 /* Decode, dfmf mode: Ut holds 3 blocks (C x dirs each), SX 3 blocks (n x C each); output is
-   RGB interleaved per (light, view) row: out[t][3 d + c]. Work-item (strip of 16 dirs, t). */
-__kernel void fmf_decode_dfmf(__global const float* Ut, __global const float* SX, int C, int dirs, int n, float eps,
-                              __global float* out) {
-  int d0 = get_global_id(0) * 16, t = get_global_id(1);
-  if (t >= n || d0 >= dirs) return;
-  __global float* o = out + (size_t)t * dirs * 3;
+   RGB interleaved per (light, view) row: out[t][3 d + c]. Block c has Cb[c] <= C components
+   (the rest zero padding: dfmf's chroma ranks are often a few where the luminance has hundreds),
+   so each block's sum stops at its own (adding the padding's zeros changed nothing but the time:
+   3 x the operations at chroma rank 4 and luminance 1024). Work-item (strip of 16 dirs, texels
+   4 tb .. 4 tb + 3): each Ut load feeds 4 texels, as fmf_decode_rgb (a work-item per texel took
+   41 s for the textile at luminance rank 1024 on PoCL's CPU device, the C++ path 2.6 s). */
+inline void fmf_strip4(__global const float* Ut, __global const float* S, int C, int Ck, int dirs, int d0, float16* a) {
+  float16 a0 = (float16)(0.0f), a1 = a0, a2 = a0, a3 = a0;
+  for (int k = 0; k < Ck; ++k) {
+    float16 u = vload16(0, Ut + (size_t)k * dirs + d0);
+    a0 = mad((float16)(S[k]), u, a0);
+    a1 = mad((float16)(S[C + k]), u, a1);
+    a2 = mad((float16)(S[2 * C + k]), u, a2);
+    a3 = mad((float16)(S[3 * C + k]), u, a3);
+  }
+  a[0] = a0, a[1] = a1, a[2] = a2, a[3] = a3;
+}
+
+__kernel void fmf_decode_dfmf(__global const float* Ut, __global const float* SX, int C, int Cy, int Cu, int Cv, int dirs, int n,
+                              float eps, __global float* out) {
+  int d0 = get_global_id(0) * 16, t0 = get_global_id(1) * 4;
+  if (t0 >= n || d0 >= dirs) return;
   size_t ub = (size_t)C * dirs, sb = (size_t)n * C;
-  int dend = min(d0 + 16, dirs);
-  if (d0 + 16 <= dirs) {
-    float16 y = (float16)(0.0f), u = (float16)(0.0f), v = (float16)(0.0f);
-    for (int k = 0; k < C; ++k) {
-      size_t off = (size_t)k * dirs + d0;
-      y = mad((float16)(SX[(size_t)t * C + k]), vload16(0, Ut + off), y);
-      u = mad((float16)(SX[sb + (size_t)t * C + k]), vload16(0, Ut + ub + off), u);
-      v = mad((float16)(SX[2 * sb + (size_t)t * C + k]), vload16(0, Ut + 2 * ub + off), v);
+  int nt = min(4, n - t0);
+  if (d0 + 16 <= dirs && nt == 4) {
+    float16 y[4], u[4], v[4];
+    fmf_strip4(Ut, SX + (size_t)t0 * C, C, Cy, dirs, d0, y);
+    fmf_strip4(Ut + ub, SX + sb + (size_t)t0 * C, C, Cu, dirs, d0, u);
+    fmf_strip4(Ut + 2 * ub, SX + 2 * sb + (size_t)t0 * C, C, Cv, dirs, d0, v);
+    for (int j = 0; j < 4; ++j) {
+      float yy[16], uu[16], vv[16];
+      vstore16(y[j], 0, yy);
+      vstore16(u[j], 0, uu);
+      vstore16(v[j], 0, vv);
+      __global float* o = out + (size_t)(t0 + j) * dirs * 3;
+      for (int i = 0; i < 16; ++i) vstore3(fmf_undecorrelate(yy[i], uu[i], vv[i], eps), d0 + i, o);
     }
-    float yy[16], uu[16], vv[16];
-    vstore16(y, 0, yy);
-    vstore16(u, 0, uu);
-    vstore16(v, 0, vv);
-    for (int j = 0; j < 16; ++j) vstore3(fmf_undecorrelate(yy[j], uu[j], vv[j], eps), d0 + j, o);
-  } else {
+    return;
+  }
+  int dend = min(d0 + 16, dirs);
+  for (int t = t0; t < t0 + nt; ++t) {
+    __global float* o = out + (size_t)t * dirs * 3;
     for (int d = d0; d < dend; ++d) {
       float y = 0.0f, u = 0.0f, v = 0.0f;
-      for (int k = 0; k < C; ++k) {
-        size_t off = (size_t)k * dirs + d;
-        y = mad(SX[(size_t)t * C + k], Ut[off], y);
-        u = mad(SX[sb + (size_t)t * C + k], Ut[ub + off], u);
-        v = mad(SX[2 * sb + (size_t)t * C + k], Ut[2 * ub + off], v);
-      }
+      for (int k = 0; k < Cy; ++k) y = mad(SX[(size_t)t * C + k], Ut[(size_t)k * dirs + d], y);
+      for (int k = 0; k < Cu; ++k) u = mad(SX[sb + (size_t)t * C + k], Ut[ub + (size_t)k * dirs + d], u);
+      for (int k = 0; k < Cv; ++k) v = mad(SX[2 * sb + (size_t)t * C + k], Ut[2 * ub + (size_t)k * dirs + d], v);
       vstore3(fmf_undecorrelate(y, u, v, eps), d, o);
     }
   }

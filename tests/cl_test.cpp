@@ -82,6 +82,31 @@ TEST(OpenCL, DecodeKernelsMatchReference) {
       ASSERT_TRUE(dev.value()->decode(texels, lights, views, got.data()).ok());
       EXPECT_LE(rel_diff(got, ref), k_tol) << "mode " << mode << " C " << C;
     }
+  // dfmf with chroma blocks of fewer components than the luminance's (zero-padded to C; the
+  // kernel stops at each block's own count, block_C), over every light: 33 directions, so whole
+  // 16-direction strips of 4 texels and the tails.
+  for (bool told : {true, false}) {
+    const int C = 17;
+    fmf_cl::PackedFactors f = random_factors(BTFC_FMF_DFMF, C, 11, 3, 19 * 7, 321);
+    for (float& x : f.SxV) x *= 0.3f;
+    const int own[3] = {C, 5, 2};
+    for (int b = 1; b < 3; ++b) {
+      for (int r = 0; r < f.rows_per_block; ++r)
+        for (int k = own[b]; k < C; ++k) f.U[(size_t(b) * f.rows_per_block + r) * C + k] = 0.0f;
+      for (int t = 0; t < f.texels; ++t)
+        for (int k = own[b]; k < C; ++k) f.SxV[(size_t(b) * f.texels + t) * C + k] = 0.0f;
+    }
+    if (told) f.block_C = {own[0], own[1], own[2]};
+    auto dev = fmf_cl::DeviceFactors::upload(f);
+    ASSERT_TRUE(dev.ok());
+    std::vector<int> texels = {0, 5, 6, 7, 100, 132, 3, 4, 9}, lights, views = {2, 0, 1};
+    for (int l = 0; l < 11; ++l) lights.push_back((l * 7) % 11);
+    const size_t rows = 3 * lights.size() * views.size();
+    std::vector<float> ref(texels.size() * rows), got(ref.size());
+    fmf_cl::decode_reference(f, texels, lights, views, ref.data());
+    ASSERT_TRUE(dev.value()->decode(texels, lights, views, got.data()).ok());
+    EXPECT_LE(rel_diff(got, ref), k_tol) << "padded chroma, block_C " << (told ? "given" : "empty");
+  }
 }
 
 TEST(OpenCL, ModelDecodeAndEvalOnSyntheticBtfMatchCpuPath) {

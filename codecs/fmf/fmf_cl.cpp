@@ -280,6 +280,7 @@ Status DeviceFactors::decode(std::span<const int> texels, std::span<const int> l
   const bool rgb = s.mode == BTFC_FMF_RGB;
   BTFC_ASSIGN_OR_RETURN(ocl::Kernel k, rt->kernel("fmf", rgb ? "fmf_decode_rgb" : "fmf_decode_dfmf"));
   const size_t nl = lights.size(), nv = views.size(), dirs = nl * nv, rows = 3 * dirs, C = size_t(s.C);
+  auto own_C = [&](int b) { return int32_t(size_t(b) < s.block_C.size() ? std::clamp(s.block_C[size_t(b)], 0, s.C) : s.C); };
   // The selected U rows, transposed per block (kernel reads 16 consecutive rows as a float16).
   const size_t cols = rgb ? rows : dirs;  // columns of Ut per block
   std::vector<float> Ut(size_t(s.blocks) * C * cols);
@@ -308,10 +309,13 @@ Status DeviceFactors::decode(std::span<const int> texels, std::span<const int> l
         std::copy_n(SXall.data() + (size_t(b) * s.texels + size_t(texels[first + i])) * C, C, SX.data() + (size_t(b) * n + i) * C);
     BTFC_ASSIGN_OR_RETURN(ocl::Buffer sxb, ocl::Buffer::create(*rt, SX.size() * 4, SX.data(), ocl::Access::read_only));
     BTFC_ASSIGN_OR_RETURN(ocl::Buffer ob, ocl::Buffer::wrap(*rt, n * rows * 4, out + first * rows, ocl::Access::write_only));
-    if (rgb) BTFC_RETURN_IF_ERROR(k.args(utb, sxb, int32_t(C), int32_t(cols), int32_t(n), ob));
-    else BTFC_RETURN_IF_ERROR(k.args(utb, sxb, int32_t(C), int32_t(cols), int32_t(n), s.eps, ob));
-    // rgb: each work-item does 16 rows x 4 texels; dfmf: 16 directions x 1 texel.
-    const size_t global[2] = {(cols + 15) / 16, rgb ? (n + 3) / 4 : n};
+    if (rgb) {
+      BTFC_RETURN_IF_ERROR(k.args(utb, sxb, int32_t(C), int32_t(cols), int32_t(n), ob));
+    } else {
+      BTFC_RETURN_IF_ERROR(k.args(utb, sxb, int32_t(C), own_C(0), own_C(1), own_C(2), int32_t(cols), int32_t(n), s.eps, ob));
+    }
+    // Each work-item does 16 rows (rgb) or directions (dfmf) x 4 texels.
+    const size_t global[2] = {(cols + 15) / 16, (n + 3) / 4};
     BTFC_RETURN_IF_ERROR(k.launch(2, global, nullptr, "fmf_decode"));
     BTFC_RETURN_IF_ERROR(ob.sync_to_host(n * rows * 4));
   }

@@ -20,6 +20,9 @@ struct PackedFactors {
   int mode = BTFC_FMF_RGB;
   int blocks = 1, C = 0, rows_per_block = 0, texels = 0, nL = 0, nV = 0;
   float eps = BTFC_DRR_EPS;  // dfmf: the luminance offset (Bonn's colour model 11: BTFC_DRR_EPS)
+  // Each block's own components (<= C; the rest of its C columns are zeros): dfmf's chroma blocks
+  // are padded to the luminance's C. Empty: C each. The decode kernel stops at them.
+  std::vector<int> block_C;
   std::vector<float> U, SxV;
 };
 

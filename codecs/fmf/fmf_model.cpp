@@ -16,7 +16,7 @@ fmf_cl::PackedFactors FmfModel::packed() const {
   fmf_cl::PackedFactors f;
   f.mode = m_cfg.dfmf ? BTFC_FMF_DFMF : BTFC_FMF_RGB;
   f.blocks = int(m_blocks.size());
-  for (const Block& b : m_blocks) f.C = std::max(f.C, int(b.U.cols()));
+  for (const Block& b : m_blocks) f.C = std::max(f.C, int(b.U.cols())), f.block_C.push_back(int(b.U.cols()));
   f.rows_per_block = int(m_blocks[0].U.rows());
   f.texels = int(m_desc.num_texels());
   f.nL = int(m_desc.num_lights());
