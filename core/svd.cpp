@@ -2,6 +2,7 @@
 #include "core/svd.h"
 
 #include "core/blas_env.h"
+#include "core/btf.h"
 #include "core/memory.h"
 #include "core/sparse_sketch.h"
 #include "core/thin_product.h"
@@ -766,8 +767,9 @@ SvdResult leading(const SvdResult& r, int rank) {
 // the kept one (the ranks computed in a search grow geometrically, so together they cost about
 // two of the largest), rounded up to 64, at most the scope's rank, then the largest rank up to
 // that which `randomized` accepts (the automatic choice still factorizes it randomized; r's is).
+int wanted_rank(int r, int kept, int scope_rank) { return std::max(r, std::min(scope_rank, (std::max(2 * r, 2 * kept) + 63) / 64 * 64)); }
 int grown_rank(int r, int kept, int scope_rank, const std::function<bool(int)>& randomized) {
-  int lo = r, hi = std::max(r, std::min(scope_rank, (std::max(2 * r, 2 * kept) + 63) / 64 * 64));
+  int lo = r, hi = wanted_rank(r, kept, scope_rank);
   while (lo < hi) {
     const int mid = lo + (hi - lo + 1) / 2;
     if (randomized(mid))
@@ -793,7 +795,7 @@ Result<std::optional<SvdResult>> reused_randomized(ConstMapF& B, const SvdOption
            k.scheme == int(opt.scheme) && k.seed == opt.seed && k.sparse == opt.sparse_sketch;
   };
   int kept_rank = 0;
-  bool gram_kept = false;
+  bool gram_kept = false, exact_kept = false;
   {
     std::lock_guard<std::mutex> lock(g_reuse_mutex);
     if (g_kept_randomized && same(*g_kept_randomized)) {
@@ -803,18 +805,10 @@ Result<std::optional<SvdResult>> reused_randomized(ConstMapF& B, const SvdOption
         return std::optional<SvdResult>(leading(g_kept_randomized->r, opt.max_rank));
       }
     }
-    gram_kept = g_reuse_scopes > 0 && std::any_of(g_reuse.begin(), g_reuse.end(), [&](const GramEigen& e) {
+    exact_kept = g_reuse_scopes > 0;
+    gram_kept = exact_kept && std::any_of(g_reuse.begin(), g_reuse.end(), [&](const GramEigen& e) {
                   return e.fingerprint == fp && e.m == B.rows() && e.n == B.cols();
                 });
-  }
-  // The search has the exact Gram eigenpairs of this matrix already (ExactSvdReuse, from a probe
-  // whose rank the automatic choice factorized exactly): any rank is one projection away (1-2 s
-  // on the textile at rank 400-1000, where a randomized SVD of grown rank took 6-12 s), and exact.
-  // The exact path does not check for non-finite values (svd_checks_finite): the caller checked
-  // this same data before that exact factorization.
-  if (gram_kept && opt.method == SvdMethod::automatic) {
-    BTFC_ASSIGN_OR_RETURN(SvdResult r, exact_svd(B, opt, fp));
-    return std::optional<SvdResult>(std::move(r));
   }
   SvdOptions big = opt;
   big.max_rank = grown_rank(opt.max_rank, kept_rank, scope_rank, [&](int rank) {
@@ -822,6 +816,19 @@ Result<std::optional<SvdResult>> reused_randomized(ConstMapF& B, const SvdOption
     t.max_rank = rank;
     return resolved_method(size_t(B.rows()), size_t(B.cols()), t) == SvdMethod::randomized;
   });
+  // The exact path instead, where the automatic choice allows it and a search keeps its Gram
+  // eigenpairs (ExactSvdReuse): when a probe has computed them already (any rank is then one
+  // projection away: 1-2 s on the textile at ranks 400-1000, where a randomized SVD of grown rank
+  // took 6-12 s), or when the growth is capped by the randomized path's range (a small side the
+  // exact path serves, where a rank past an eighth of it is factorized exactly anyway: the grown
+  // randomized SVD would cost about as much as the Gram, and serve fewer ranks). The randomized
+  // path's input check (svd_checks_finite) is kept: one read of B.
+  const bool capped = big.max_rank < wanted_rank(opt.max_rank, kept_rank, scope_rank);
+  if (opt.method == SvdMethod::automatic && (gram_kept || (capped && exact_kept))) {
+    if (find_non_finite(B.data(), size_t(B.size())) < size_t(B.size())) return non_finite_input();
+    BTFC_ASSIGN_OR_RETURN(SvdResult r, exact_svd(B, opt, fp));
+    return std::optional<SvdResult>(std::move(r));
+  }
   BTFC_ASSIGN_OR_RETURN(SvdResult r, randomized_svd(B, big));
   std::lock_guard<std::mutex> lock(g_reuse_mutex);
   ++g_randomized_computed, ++g_randomized_served;
@@ -927,6 +934,21 @@ Result<RandomizedSvdReuse::Set> RandomizedSvdReuse::serve_set(uint64_t key, cons
     g_kept_set = std::move(k);
   }
   return t;
+}
+
+bool RandomizedSvdReuse::grows_past_randomized(uint64_t key, const std::vector<int>& ranks, const std::function<bool(int)>& randomized_at) {
+  std::vector<int> kept(ranks.size(), 0);
+  int scope_rank = 0;
+  {
+    std::lock_guard<std::mutex> lock(g_reuse_mutex);
+    if (g_randomized_scopes == 0 || g_reuse_scopes == 0) return false;
+    if (g_kept_set && g_kept_set->key == key && g_kept_set->ranks.size() == ranks.size()) kept = g_kept_set->ranks;
+    scope_rank = g_randomized_rank;
+  }
+  for (size_t i = 0; i < ranks.size(); ++i)
+    if (kept[i] < ranks[i] && grown_rank(ranks[i], kept[i], scope_rank, randomized_at) < wanted_rank(ranks[i], kept[i], scope_rank))
+      return true;
+  return false;
 }
 
 bool RandomizedSvdReuse::active() {

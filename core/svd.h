@@ -216,6 +216,13 @@ class RandomizedSvdReuse {
   RandomizedSvdReuse(const RandomizedSvdReuse&) = delete;
   RandomizedSvdReuse& operator=(const RandomizedSvdReuse&) = delete;
   static bool active();      // a scope is alive
+  // Whether serve_set(key, ranks, randomized_at, ...) would compute a set at a rank the
+  // randomized path cannot grow to (randomized_at caps it below the growth rule's rank), inside
+  // both a RandomizedSvdReuse and an ExactSvdReuse scope. A caller that can factorize its
+  // matrices exactly then should (fmf's color=dfmf channels): the exact path keeps their Gram
+  // eigenpairs and serves every later rank, where a randomized set at the capped rank costs about
+  // as much and serves fewer (truncated_svd does the same for one matrix).
+  static bool grows_past_randomized(uint64_t key, const std::vector<int>& ranks, const std::function<bool(int)>& randomized_at);
   static size_t computed();  // randomized SVDs the scopes computed (tests)
   static size_t served();    // truncations they served, computed ones included (tests)
 

@@ -6,6 +6,7 @@
 #include <Eigen/Dense>
 #include <omp.h>
 #include <cmath>
+#include <limits>
 #include <cstdio>
 #include <cstring>
 #include <memory>
@@ -792,6 +793,62 @@ TEST(Svd, InASearchARandomizedRankIsProjectedFromTheKeptExactGram) {
   auto after = truncated_svd(b.data(), m, n, o);  // the scopes are gone: the automatic choice again
   ASSERT_TRUE(after.ok());
   EXPECT_EQ(after->method, "randomized");
+}
+
+TEST(Svd, InASearchARankWhoseGrowthTheRandomizedPathCapsIsFactorizedExactly) {
+  // Inside both scopes, a randomized request whose grown rank (twice itself, rounded up to 64)
+  // the randomized path cannot reach (small side 1100: randomized up to rank 121) is factorized
+  // exactly, its Gram eigenpairs kept for later ranks; with the randomized scope alone, grown
+  // to the cap as before. A non-finite value is still an error (the randomized path's check).
+  const size_t m = 1300, n = 1100;
+  std::vector<float> b = test_matrix(m, n, 60, 4);
+  SvdOptions o;
+  o.truncation_ok = true;
+  o.max_rank = 100;  // grown: 256 wanted, 121 reachable
+  ASSERT_EQ(resolved_method(m, n, o), SvdMethod::randomized);
+  const size_t computed0 = RandomizedSvdReuse::computed(), reuses0 = ExactSvdReuse::reuses();
+  {
+    const RandomizedSvdReuse keep_randomized(512);
+    auto r = truncated_svd(b.data(), m, n, o);
+    ASSERT_TRUE(r.ok());
+    EXPECT_EQ(r->method, "randomized") << "no exact scope: grown to the cap";
+    EXPECT_EQ(RandomizedSvdReuse::computed() - computed0, 1u);
+  }
+  {
+    const ExactSvdReuse keep_gram;
+    const RandomizedSvdReuse keep_randomized(512);
+    o.max_rank = 30;  // wanted 64: reachable, randomized as before (kept at 64)
+    auto low = truncated_svd(b.data(), m, n, o);
+    ASSERT_TRUE(low.ok());
+    EXPECT_EQ(low->method, "randomized");
+    EXPECT_EQ(RandomizedSvdReuse::computed() - computed0, 2u);
+    o.max_rank = 50;  // covered by the kept one
+    auto covered = truncated_svd(b.data(), m, n, o);
+    ASSERT_TRUE(covered.ok());
+    EXPECT_EQ(covered->method, "randomized");
+    std::vector<float> c = b;  // another matrix: nothing kept for it
+    c[3] += 1.0f;
+    o.max_rank = 100;
+    auto r = truncated_svd(c.data(), m, n, o);
+    ASSERT_TRUE(r.ok());
+    EXPECT_EQ(r->method, "exact") << "the growth is capped: exact, its Gram kept";
+    EXPECT_EQ(RandomizedSvdReuse::computed() - computed0, 2u);
+    o.max_rank = 110;
+    auto again = truncated_svd(c.data(), m, n, o);
+    ASSERT_TRUE(again.ok());
+    EXPECT_EQ(again->method, "exact");
+    EXPECT_EQ(ExactSvdReuse::reuses() - reuses0, 1u);
+    c[7] = std::numeric_limits<float>::quiet_NaN();
+    auto bad = truncated_svd(c.data(), m, n, o);
+    ASSERT_FALSE(bad.ok());
+    EXPECT_EQ(bad.status().code(), StatusCode::corrupt_data) << bad.status().message();
+    // The same rule for a set of matrices (color=dfmf's stream): the caller is told.
+    auto randomized_at = [](int r) { return r <= 121; };
+    EXPECT_TRUE(RandomizedSvdReuse::grows_past_randomized(42, {100, 4, 4}, randomized_at));
+    EXPECT_FALSE(RandomizedSvdReuse::grows_past_randomized(42, {30, 4, 4}, randomized_at));
+  }
+  const RandomizedSvdReuse keep_randomized(512);  // no exact scope: never
+  EXPECT_FALSE(RandomizedSvdReuse::grows_past_randomized(42, {100, 4, 4}, [](int r) { return r <= 121; }));
 }
 
 TEST(Svd, ReuseServesAnExactSvdAgainAtAnotherRankWithTheSameResult) {

@@ -225,6 +225,39 @@ class FmfCodec final : public Codec {
       const float offset = config_from(rp).offset;
       stats.add("dfmf_offset", offset);
       size_t clamped = 0;
+      float* const scratch = streamed && ctx.consumable == &btf && !dfmf_target ? ctx.consumable->data() : nullptr;
+      // In a byte-budget search (a RandomizedSvdReuse scope) the probes take the leading
+      // components of a few streams at growing ranks (svd.h), keyed by the data's fingerprint
+      // (a read of the BTF, so only there), the offset and the SVD options; not when the
+      // stream converts the input in place.
+      const bool searched = streamed && !scratch && RandomizedSvdReuse::active();
+      const std::vector<int> want{ranks[0], ranks[1], ranks[2]};
+      uint64_t key = 0;
+      auto randomized_at = [&](int r) {
+        SvdOptions t = oc[0];
+        t.max_rank = r;
+        return resolved_method(rows, n, t) == SvdMethod::randomized;
+      };
+      if (searched) {
+        uint32_t offset_bits;
+        std::memcpy(&offset_bits, &offset, 4);
+        const SvdOptions& o = oc[0];
+        key = data_fingerprint(btf.data(), btf.size());
+        for (const uint64_t v :
+             {uint64_t(offset_bits), uint64_t(rows), uint64_t(n), uint64_t(o.oversample), uint64_t(o.power_iters), uint64_t(o.scheme),
+              uint64_t(o.seed), uint64_t(o.sparse_sketch), uint64_t(o.sketch_sums), uint64_t(o.method)})
+          key = (key ^ v) * 0x100000001B3ull, key ^= key >> 31;
+        // A stream the randomized path cannot grow (a small side the exact path serves): one
+        // channel at a time instead, through truncated_svd, which factorizes such a channel
+        // exactly and keeps its Gram eigenpairs for every later probe (ExactSvdReuse), and the
+        // others (chroma of a few components) randomized as before. The textile's chroma-4
+        // setting: a stream at rank 495 took 17 s, then the luminance's exact Gram 13 s more at
+        // rank 952.
+        if (RandomizedSvdReuse::grows_past_randomized(key, want, randomized_at)) {
+          streamed = false;
+          BTFC_RETURN_IF_ERROR(btf.check_finite("fmf input"));
+        }
+      }
       if (streamed) {
         // Randomized: the three channel matrices in one stream over the Btf's own memory
         // (ooc_dfmf.h), each pass converting a part of the data at a time and running every
@@ -236,7 +269,6 @@ class FmfCodec final : public Codec {
         // channels there (a fifth to a quarter of the encode at UBO2003 size, docs/benchmarks.md).
         // Not for target_error, whose search compares decodes against the input.
         const MatrixChunks src(btf.data(), d.abrdf_size(), n, std::max<size_t>(1, (size_t(64) << 20) / d.abrdf_size()));
-        float* const scratch = ctx.consumable == &btf && !dfmf_target ? ctx.consumable->data() : nullptr;
         auto stream = [&](const std::vector<int>& rk) -> Result<RandomizedSvdReuse::Set> {
           SvdOptions oy = oc[0], oca = oc[1];
           oy.max_rank = rk[0], oca.max_rank = std::max(rk[1], rk[2]);
@@ -246,30 +278,7 @@ class FmfCodec final : public Codec {
                                 dfmf_streaming_svds(src, owned_chunks(src, 0, 1), offset, oy, oca, one, nullptr, 0, &cl, scratch));
           return RandomizedSvdReuse::Set{std::move(rs), cl};
         };
-        // In a byte-budget search (a RandomizedSvdReuse scope) the probes take the leading
-        // components of a few streams at growing ranks (svd.h), keyed by the data's fingerprint
-        // (a read of the BTF, so only there), the offset and the SVD options; not when the
-        // stream converts the input in place.
-        Result<RandomizedSvdReuse::Set> r = unsupported("");
-        const std::vector<int> want{ranks[0], ranks[1], ranks[2]};
-        if (scratch || !RandomizedSvdReuse::active()) {
-          r = stream(want);
-        } else {
-          uint32_t offset_bits;
-          std::memcpy(&offset_bits, &offset, 4);
-          const SvdOptions& o = oc[0];
-          uint64_t key = data_fingerprint(btf.data(), btf.size());
-          for (const uint64_t v :
-               {uint64_t(offset_bits), uint64_t(rows), uint64_t(n), uint64_t(o.oversample), uint64_t(o.power_iters), uint64_t(o.scheme),
-                uint64_t(o.seed), uint64_t(o.sparse_sketch), uint64_t(o.sketch_sums), uint64_t(o.method)})
-            key = (key ^ v) * 0x100000001B3ull, key ^= key >> 31;
-          auto randomized_at = [&](int rank) {
-            SvdOptions t = o;
-            t.max_rank = rank;
-            return resolved_method(rows, n, t) == SvdMethod::randomized;
-          };
-          r = RandomizedSvdReuse::serve_set(key, want, randomized_at, stream);
-        }
+        Result<RandomizedSvdReuse::Set> r = searched ? RandomizedSvdReuse::serve_set(key, want, randomized_at, stream) : stream(want);
         if (!r.ok() && r.status().code() == StatusCode::corrupt_data) {
           // A non-finite value (ooc_svd.h): named where the input is intact, else (converted in
           // place in the first pass) its texel.
