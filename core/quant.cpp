@@ -138,7 +138,7 @@ void dequantize(const Header& h, const int32_t* q, const float* steps, float* ou
 // in the hundreds: 25-40 MB) are compressed as two jobs of half the planes each on two zstd
 // workers, the second reloading the last quarter window of the first (ZSTD_c_overlapLog 7): at
 // level 19 one such call took 6-8.5 s on one core and was most of a byte-budget probe's time at
-// large ranks; two jobs took 4.2-5 s for 0.1-0.2 % more bytes (25 and 31 MB of 6-bit planes,
+// large ranks; two jobs took 3.5-5 s for 0.1-0.3 % more bytes (25 and 31 MB of 6-bit planes,
 // docs/benchmarks.md). The jobs depend on the size only, so the bytes are the same on every
 // machine; readers see an ordinary frame. A libzstd without threads: one job, as below.
 constexpr size_t k_two_jobs_from = size_t(8) << 20;

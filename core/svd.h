@@ -207,7 +207,11 @@ class ExactSvdReuse {
 // leading components of a rank-R factorization come from a larger sketch (more oversampling) and
 // are as accurate as a rank-r one's or more, but not the same bits: a model from a search can
 // differ from the same spec encoded alone, within the randomized SVD's accuracy (tests compare
-// both). Holds one factorization, (m + n) R floats.
+// both). Holds one factorization, (m + n) R floats. Inside an ExactSvdReuse scope as well, and
+// with the automatic method, a request that the kept one does not cover takes the exact path
+// instead when that scope holds the matrix's Gram eigenpairs already, or when R would be cut
+// below the rule above by the randomized path's range (a small side of at most 4096, where the
+// exact path serves every rank at one cost); the input is still checked for non-finite values.
 // Not for concurrent searches.
 class RandomizedSvdReuse {
  public:
