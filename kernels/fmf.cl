@@ -128,6 +128,20 @@ __kernel void fmf_eval_interp(__global const float* U, __global const float* SxV
   vstore3(acc, i, out);
 }
 
+/* a[j] = sum over k < Ck of S[j C + k] Ut[k][d0 .. d0 + 15] (row stride `dirs`), j = 0..3: a strip
+   of 16 columns of Ut for 4 consecutive rows of S, each Ut load feeding the 4 (both decodes). */
+inline void fmf_strip4(__global const float* Ut, __global const float* S, int C, int Ck, int dirs, int d0, float16* a) {
+  float16 a0 = (float16)(0.0f), a1 = a0, a2 = a0, a3 = a0;
+  for (int k = 0; k < Ck; ++k) {
+    float16 u = vload16(0, Ut + (size_t)k * dirs + d0);
+    a0 = mad((float16)(S[k]), u, a0);
+    a1 = mad((float16)(S[C + k]), u, a1);
+    a2 = mad((float16)(S[2 * C + k]), u, a2);
+    a3 = mad((float16)(S[3 * C + k]), u, a3);
+  }
+  a[0] = a0, a[1] = a1, a[2] = a2, a[3] = a3;
+}
+
 /* Decode, rgb mode: out[t][r] = sum_k SX[t][k] Ut[k][r] for a texel block.
    Ut is the selected U rows transposed (C x rows), so 16 consecutive rows load as one float16.
    Work-item (strip, tb) computes rows [16 strip, 16 strip + 16) of texels 4 tb .. 4 tb + 3: each
@@ -137,19 +151,9 @@ __kernel void fmf_decode_rgb(__global const float* Ut, __global const float* SX,
   if (t0 >= n || r0 >= rows) return;
   int nt = min(4, n - t0);
   if (r0 + 16 <= rows && nt == 4) {
-    __global const float* s0 = SX + (size_t)t0 * C;
-    float16 a0 = (float16)(0.0f), a1 = a0, a2 = a0, a3 = a0;
-    for (int k = 0; k < C; ++k) {
-      float16 u = vload16(0, Ut + (size_t)k * rows + r0);
-      a0 = mad((float16)(s0[k]), u, a0);
-      a1 = mad((float16)(s0[C + k]), u, a1);
-      a2 = mad((float16)(s0[2 * C + k]), u, a2);
-      a3 = mad((float16)(s0[3 * C + k]), u, a3);
-    }
-    vstore16(a0, 0, out + (size_t)t0 * rows + r0);
-    vstore16(a1, 0, out + (size_t)(t0 + 1) * rows + r0);
-    vstore16(a2, 0, out + (size_t)(t0 + 2) * rows + r0);
-    vstore16(a3, 0, out + (size_t)(t0 + 3) * rows + r0);
+    float16 a[4];
+    fmf_strip4(Ut, SX + (size_t)t0 * C, C, C, rows, r0, a);
+    for (int j = 0; j < 4; ++j) vstore16(a[j], 0, out + (size_t)(t0 + j) * rows + r0);
     return;
   }
   int rend = min(r0 + 16, rows);
@@ -168,18 +172,6 @@ __kernel void fmf_decode_rgb(__global const float* Ut, __global const float* SX,
    3 x the operations at chroma rank 4 and luminance 1024). Work-item (strip of 16 dirs, texels
    4 tb .. 4 tb + 3): each Ut load feeds 4 texels, as fmf_decode_rgb (a work-item per texel took
    41 s for the textile at luminance rank 1024 on PoCL's CPU device, the C++ path 2.6 s). */
-inline void fmf_strip4(__global const float* Ut, __global const float* S, int C, int Ck, int dirs, int d0, float16* a) {
-  float16 a0 = (float16)(0.0f), a1 = a0, a2 = a0, a3 = a0;
-  for (int k = 0; k < Ck; ++k) {
-    float16 u = vload16(0, Ut + (size_t)k * dirs + d0);
-    a0 = mad((float16)(S[k]), u, a0);
-    a1 = mad((float16)(S[C + k]), u, a1);
-    a2 = mad((float16)(S[2 * C + k]), u, a2);
-    a3 = mad((float16)(S[3 * C + k]), u, a3);
-  }
-  a[0] = a0, a[1] = a1, a[2] = a2, a[3] = a3;
-}
-
 __kernel void fmf_decode_dfmf(__global const float* Ut, __global const float* SX, int C, int Cy, int Cu, int Cv, int dirs, int n,
                               float eps, __global float* out) {
   int d0 = get_global_id(0) * 16, t0 = get_global_id(1) * 4;
