@@ -165,10 +165,10 @@ Status FmfModel::quantize_block(Block& b) const {
 
 void FmfModel::quantize_blocks() {
   // Each block's SxV is one zstd call (level 19; single-threaded below 8 MiB of planes, two jobs
-  // above, core/quant.h; its U, a few rows, runs beside it): most of a q encode's time. color=dfmf's three blocks go to two threads, each taking the
-  // next block in order (y on one, u then v on the other; the UBO2003 slice's 256 x 256 texels
-  // at rank 64: encode 11.4 -> 5.8-6.4 s), at most two eigen-texture coders (<= 81 MB each)
-  // alive. The same bytes either way.
+  // above, core/quant.h; its U, a few rows, runs beside it): most of a q encode's time.
+  // color=dfmf's three blocks go to two threads, each taking the next block in order (y on one,
+  // u then v on the other; the UBO2003 slice's 256 x 256 texels at rank 64: encode 11.4 -> 5.8-6.4
+  // s), at most two eigen-texture coders (<= 81 MB each) alive. The same bytes either way.
   std::vector<Status> status(m_blocks.size());
   std::atomic<size_t> next{0};
   auto work = [&] {
