@@ -47,24 +47,29 @@ inline float3 fmf_undecorrelate(float ylog, float u, float v, float eps) {
   return (float3)(y + 1.13983f * v, y - 0.39465f * u - 0.5806f * v, y + 2.03211f * u);
 }
 
+/* One measured value. dfmf: each block's dot stops at its own component count (Cy, Cu, Cv <= C;
+   the chroma blocks' columns past theirs are zero padding to the luminance's C, often hundreds
+   where the chroma has a few), so only the rounding of the sums differs from the reference's
+   padded dots. rgb ignores them. */
 inline float3 fmf_value(__global const float* U, __global const float* SxV, int C, int nL, int rows_per_block,
-                        int texels, int mode, float eps, int texel, int l, int v) {
+                        int texels, int mode, float eps, int Cy, int Cu, int Cv, int texel, int l, int v) {
   if (mode == BTFC_FMF_RGB) {
     return fmf_dot3(U + (size_t)(3 * (l + nL * v)) * C, SxV + (size_t)texel * C, C);
   }
   size_t r = (size_t)(l + nL * v) * C, t = (size_t)texel * C;
   size_t ub = (size_t)rows_per_block * C, sb = (size_t)texels * C;
-  return fmf_undecorrelate(fmf_dot(U + r, SxV + t, C), fmf_dot(U + ub + r, SxV + sb + t, C),
-                           fmf_dot(U + 2 * ub + r, SxV + 2 * sb + t, C), eps);
+  return fmf_undecorrelate(fmf_dot(U + r, SxV + t, Cy), fmf_dot(U + ub + r, SxV + sb + t, Cu),
+                           fmf_dot(U + 2 * ub + r, SxV + 2 * sb + t, Cv), eps);
 }
 
 /* Evaluation at measured (texel, light, view) triples: q[i] = (texel, light, view, unused). */
 __kernel void fmf_eval_measured(__global const float* U, __global const float* SxV, int C, int nL, int rows_per_block,
-                                int texels, int mode, float eps, __global const int4* q, int n, __global float* out) {
+                                int texels, int mode, float eps, int Cy, int Cu, int Cv, __global const int4* q, int n,
+                                __global float* out) {
   int i = get_global_id(0);
   if (i >= n) return;
   int4 Q = q[i];
-  float3 rgb = fmf_value(U, SxV, C, nL, rows_per_block, texels, mode, eps, Q.x, Q.y, Q.z);
+  float3 rgb = fmf_value(U, SxV, C, nL, rows_per_block, texels, mode, eps, Cy, Cu, Cv, Q.x, Q.y, Q.z);
   vstore3(rgb, i, out);
 }
 
@@ -75,7 +80,8 @@ __kernel void fmf_eval_measured(__global const float* U, __global const float* S
    horizontal reduction per channel instead of 27 (the reduction dominated at rank 32).
    dfmf is not linear (exp per sample), so it keeps the 9 separate values. */
 __kernel void fmf_eval_interp(__global const float* U, __global const float* SxV, int C, int nL, int rows_per_block,
-                              int texels, int mode, float eps, __global const btfc_fmf_query* q, int n, __global float* out) {
+                              int texels, int mode, float eps, int Cy, int Cu, int Cv, __global const btfc_fmf_query* q,
+                              int n, __global float* out) {
   int i = get_global_id(0);
   if (i >= n) return;
   btfc_fmf_query Q = q[i];
@@ -123,7 +129,8 @@ __kernel void fmf_eval_interp(__global const float* U, __global const float* SxV
   for (int a = 0; a < 3; ++a)
     for (int b = 0; b < 3; ++b) {
       float w = Q.wl[a] * Q.wv[b];
-      if (w != 0.0f) acc += w * fmf_value(U, SxV, C, nL, rows_per_block, texels, mode, eps, Q.texel, Q.light[a], Q.view[b]);
+      if (w != 0.0f) acc += w * fmf_value(U, SxV, C, nL, rows_per_block, texels, mode, eps, Cy, Cu, Cv, Q.texel, Q.light[a],
+                                    Q.view[b]);
     }
   vstore3(acc, i, out);
 }

@@ -26,6 +26,37 @@ using test::rel_diff;
 
 constexpr double k_tol = 1e-5;  // float rounding of C-term dot products, fast-relaxed-math exp
 
+// dfmf factors of C components whose chroma blocks have own[1], own[2] (the rest zero padding,
+// as FmfModel::packed lays them out); block_C is set when `told`.
+fmf_cl::PackedFactors padded_chroma(int C, const int own[3], bool told, unsigned seed) {
+  fmf_cl::PackedFactors f = random_factors(BTFC_FMF_DFMF, C, 11, 3, 19 * 7, seed);
+  for (float& x : f.SxV) x *= 0.3f;
+  for (int b = 1; b < 3; ++b) {
+    for (int r = 0; r < f.rows_per_block; ++r)
+      for (int k = own[b]; k < C; ++k) f.U[(size_t(b) * f.rows_per_block + r) * C + k] = 0.0f;
+    for (int t = 0; t < f.texels; ++t)
+      for (int k = own[b]; k < C; ++k) f.SxV[(size_t(b) * f.texels + t) * C + k] = 0.0f;
+  }
+  if (told) f.block_C = {own[0], own[1], own[2]};
+  return f;
+}
+
+// Random interpolation queries over nL x nV directions (normalized weights).
+std::vector<btfc_fmf_query> random_interp_queries(size_t n, int texels, int nL, int nV, std::mt19937& rng) {
+  std::vector<btfc_fmf_query> iq(n);
+  for (btfc_fmf_query& q : iq) {
+    q.texel = int(rng() % texels);
+    float sl = 0, sv = 0;
+    for (int j = 0; j < 3; ++j) {
+      q.light[j] = int(rng() % nL), q.view[j] = int(rng() % nV);
+      q.wl[j] = float(rng() % 1000) / 1000.f, q.wv[j] = float(rng() % 1000) / 1000.f;
+      sl += q.wl[j], sv += q.wv[j];
+    }
+    for (int j = 0; j < 3; ++j) q.wl[j] /= sl, q.wv[j] /= sv;
+  }
+  return iq;
+}
+
 }  // namespace
 
 TEST(OpenCL, EvalKernelsMatchReference) {
@@ -40,19 +71,8 @@ TEST(OpenCL, EvalKernelsMatchReference) {
       std::mt19937 rng(5);
       const size_t n = 1001;
       std::vector<fmf_cl::MeasuredQuery> mq(n);
-      std::vector<btfc_fmf_query> iq(n);
-      for (size_t i = 0; i < n; ++i) {
-        mq[i] = {int(rng() % texels), int(rng() % nL), int(rng() % nV), 0};
-        btfc_fmf_query& q = iq[i];
-        q.texel = int(rng() % texels);
-        float sl = 0, sv = 0;
-        for (int j = 0; j < 3; ++j) {
-          q.light[j] = int(rng() % nL), q.view[j] = int(rng() % nV);
-          q.wl[j] = float(rng() % 1000) / 1000.f, q.wv[j] = float(rng() % 1000) / 1000.f;
-          sl += q.wl[j], sv += q.wv[j];
-        }
-        for (int j = 0; j < 3; ++j) q.wl[j] /= sl, q.wv[j] /= sv;
-      }
+      for (size_t i = 0; i < n; ++i) mq[i] = {int(rng() % texels), int(rng() % nL), int(rng() % nV), 0};
+      const std::vector<btfc_fmf_query> iq = random_interp_queries(n, texels, nL, nV, rng);
       auto dev = fmf_cl::DeviceFactors::upload(f);
       ASSERT_TRUE(dev.ok()) << dev.status().message();
       std::vector<float> ref(3 * n), got(3 * n);
@@ -63,6 +83,27 @@ TEST(OpenCL, EvalKernelsMatchReference) {
       ASSERT_TRUE(dev.value()->eval_interp(iq, got.data()).ok());
       EXPECT_LE(rel_diff(got, ref), k_tol) << "interpolated, mode " << mode << " C " << C;
     }
+  // dfmf chroma blocks of fewer components than the luminance's, zero-padded to C: with block_C
+  // the kernels' dots stop at each block's own count (and would miss a component if they stopped
+  // one short), without it they run over the padding; both match the padded reference.
+  for (bool told : {true, false}) {
+    const int C = 19, own[3] = {C, 9, 1};
+    const fmf_cl::PackedFactors f = padded_chroma(C, own, told, 77);
+    std::mt19937 rng(9);
+    const size_t n = 333;
+    std::vector<fmf_cl::MeasuredQuery> mq(n);
+    for (size_t i = 0; i < n; ++i) mq[i] = {int(rng() % f.texels), int(rng() % f.nL), int(rng() % f.nV), 0};
+    const std::vector<btfc_fmf_query> iq = random_interp_queries(n, f.texels, f.nL, f.nV, rng);
+    auto dev = fmf_cl::DeviceFactors::upload(f);
+    ASSERT_TRUE(dev.ok()) << dev.status().message();
+    std::vector<float> ref(3 * n), got(3 * n);
+    fmf_cl::eval_measured_reference(f, mq, ref.data());
+    ASSERT_TRUE(dev.value()->eval_measured(mq, got.data()).ok());
+    EXPECT_LE(rel_diff(got, ref), k_tol) << "measured, padded chroma, block_C " << (told ? "given" : "empty");
+    fmf_cl::eval_interp_reference(f, iq, ref.data());
+    ASSERT_TRUE(dev.value()->eval_interp(iq, got.data()).ok());
+    EXPECT_LE(rel_diff(got, ref), k_tol) << "interpolated, padded chroma, block_C " << (told ? "given" : "empty");
+  }
 }
 
 TEST(OpenCL, DecodeKernelsMatchReference) {
@@ -86,17 +127,8 @@ TEST(OpenCL, DecodeKernelsMatchReference) {
   // kernel stops at each block's own count, block_C), over every light: 33 directions, so whole
   // 16-direction strips of 4 texels and the tails.
   for (bool told : {true, false}) {
-    const int C = 17;
-    fmf_cl::PackedFactors f = random_factors(BTFC_FMF_DFMF, C, 11, 3, 19 * 7, 321);
-    for (float& x : f.SxV) x *= 0.3f;
-    const int own[3] = {C, 5, 2};
-    for (int b = 1; b < 3; ++b) {
-      for (int r = 0; r < f.rows_per_block; ++r)
-        for (int k = own[b]; k < C; ++k) f.U[(size_t(b) * f.rows_per_block + r) * C + k] = 0.0f;
-      for (int t = 0; t < f.texels; ++t)
-        for (int k = own[b]; k < C; ++k) f.SxV[(size_t(b) * f.texels + t) * C + k] = 0.0f;
-    }
-    if (told) f.block_C = {own[0], own[1], own[2]};
+    const int C = 17, own[3] = {C, 5, 2};
+    const fmf_cl::PackedFactors f = padded_chroma(C, own, told, 321);
     auto dev = fmf_cl::DeviceFactors::upload(f);
     ASSERT_TRUE(dev.ok());
     std::vector<int> texels = {0, 5, 6, 7, 100, 132, 3, 4, 9}, lights, views = {2, 0, 1};

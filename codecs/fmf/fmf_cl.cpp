@@ -213,6 +213,11 @@ Result<std::shared_ptr<DeviceFactors>> DeviceFactors::upload(const PackedFactors
 
 namespace {
 
+// Block b's own component count (PackedFactors::block_C; C where it is not given).
+int32_t own_C(const PackedFactors& s, int b) {
+  return int32_t(size_t(b) < s.block_C.size() ? std::clamp(s.block_C[size_t(b)], 0, s.C) : s.C);
+}
+
 // Queries go in slices so each slice's buffers stay far below the device's allocation limit.
 constexpr size_t k_slice = size_t(1) << 22;
 
@@ -221,11 +226,12 @@ Status run_eval(const DeviceFactors::Impl& m, const char* kernel_name, std::span
   BTFC_ASSIGN_OR_RETURN(ocl::Runtime * rt, ocl::Runtime::get());
   BTFC_ASSIGN_OR_RETURN(ocl::Kernel k, rt->kernel("fmf", kernel_name));
   const PackedFactors& s = m.shape;
+  const int32_t Cy = own_C(s, 0), Cu = own_C(s, 1), Cv = own_C(s, 2);
   for (size_t first = 0; first < q.size(); first += k_slice) {
     const size_t n = std::min(k_slice, q.size() - first);
     BTFC_ASSIGN_OR_RETURN(ocl::Buffer qb, ocl::Buffer::wrap(*rt, n * sizeof(Q), const_cast<Q*>(q.data() + first), ocl::Access::read_only));
     BTFC_ASSIGN_OR_RETURN(ocl::Buffer ob, ocl::Buffer::wrap(*rt, n * 12, out + 3 * first, ocl::Access::write_only));
-    BTFC_RETURN_IF_ERROR(k.args(m.U, m.SxV, s.C, s.nL, s.rows_per_block, s.texels, s.mode, s.eps, qb, int32_t(n), ob));
+    BTFC_RETURN_IF_ERROR(k.args(m.U, m.SxV, s.C, s.nL, s.rows_per_block, s.texels, s.mode, s.eps, Cy, Cu, Cv, qb, int32_t(n), ob));
     const size_t local = 64, global = (n + local - 1) / local * local;
     BTFC_RETURN_IF_ERROR(k.launch(1, &global, &local, kernel_name));
     BTFC_RETURN_IF_ERROR(ob.sync_to_host(n * 12));
@@ -280,7 +286,6 @@ Status DeviceFactors::decode(std::span<const int> texels, std::span<const int> l
   const bool rgb = s.mode == BTFC_FMF_RGB;
   BTFC_ASSIGN_OR_RETURN(ocl::Kernel k, rt->kernel("fmf", rgb ? "fmf_decode_rgb" : "fmf_decode_dfmf"));
   const size_t nl = lights.size(), nv = views.size(), dirs = nl * nv, rows = 3 * dirs, C = size_t(s.C);
-  auto own_C = [&](int b) { return int32_t(size_t(b) < s.block_C.size() ? std::clamp(s.block_C[size_t(b)], 0, s.C) : s.C); };
   // The selected U rows, transposed per block (kernel reads 16 consecutive rows as a float16).
   const size_t cols = rgb ? rows : dirs;  // columns of Ut per block
   std::vector<float> Ut(size_t(s.blocks) * C * cols);
@@ -312,7 +317,7 @@ Status DeviceFactors::decode(std::span<const int> texels, std::span<const int> l
     if (rgb) {
       BTFC_RETURN_IF_ERROR(k.args(utb, sxb, int32_t(C), int32_t(cols), int32_t(n), ob));
     } else {
-      BTFC_RETURN_IF_ERROR(k.args(utb, sxb, int32_t(C), own_C(0), own_C(1), own_C(2), int32_t(cols), int32_t(n), s.eps, ob));
+      BTFC_RETURN_IF_ERROR(k.args(utb, sxb, int32_t(C), own_C(s, 0), own_C(s, 1), own_C(s, 2), int32_t(cols), int32_t(n), s.eps, ob));
     }
     // Each work-item does 16 rows (rgb) or directions (dfmf) x 4 texels.
     const size_t global[2] = {(cols + 15) / 16, (n + 3) / 4};

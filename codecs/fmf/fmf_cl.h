@@ -21,7 +21,7 @@ struct PackedFactors {
   int blocks = 1, C = 0, rows_per_block = 0, texels = 0, nL = 0, nV = 0;
   float eps = BTFC_DRR_EPS;  // dfmf: the luminance offset (Bonn's colour model 11: BTFC_DRR_EPS)
   // Each block's own components (<= C; the rest of its C columns are zeros): dfmf's chroma blocks
-  // are padded to the luminance's C. Empty: C each. The decode kernel stops at them.
+  // are padded to the luminance's C. Empty: C each. The eval and decode kernels stop at them.
   std::vector<int> block_C;
   std::vector<float> U, SxV;
 };
