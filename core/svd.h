@@ -122,7 +122,8 @@ int choose_rank(const Eigen::VectorXd& lambda, double total, const SvdOptions& o
 // X := an orthonormal basis of X's columns that is orthogonal to the first `used` columns of P
 // (orthonormal), in double: block Gram-Schmidt and Cholesky QR, twice, Householder where a
 // round is ill-conditioned; columns that lie in span(P) to double precision are replaced by
-// pseudo-random ones (svd.cpp). The block step of both block Krylov SVDs (both on the rows side).
+// pseudo-random ones (krylov_blocks.cpp). The block step of both block Krylov SVDs (both on the
+// rows side).
 void orthonormalize_against(const Eigen::Ref<const Eigen::MatrixXd>& P, Eigen::Index used, Eigen::Ref<Eigen::MatrixXd> X);
 // Columns [from, w) of Wt^T Wt (w x (w - from), Wt n x w), in double: Wt's rows converted by
 // blocks of at most ~4 MB, in at most 16 fixed groups on the OpenMP threads summed in order (the
@@ -130,6 +131,11 @@ void orthonormalize_against(const Eigen::Ref<const Eigen::MatrixXd>& P, Eigen::I
 // difference of large sums: float would lose the tail of the spectrum): in core a block's new
 // columns, streamed a chunk's part.
 Eigen::MatrixXd gram_columns(const Eigen::Ref<const Eigen::MatrixXf>& Wt, Eigen::Index from);
+
+// A rows x cols Gaussian matrix (N(0, 1) floats) from a seeded engine, Box-Muller on raw 64-bit
+// draws so the numbers do not depend on the standard library's distributions: the sketch's G and
+// the power iterations' start (krylov_blocks.cpp).
+Eigen::MatrixXf gaussian_matrix(Eigen::Index rows, Eigen::Index cols, uint64_t seed);
 
 // Both block Krylov SVDs' first block (in core, svd.cpp; streamed, ooc_svd.h), on B's n columns:
 // Pi = S G, a sparse sign sketch S (n x s, one +-1 per column of B) and a Gaussian G (s x l),
