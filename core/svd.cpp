@@ -553,6 +553,9 @@ int grown_rank(int r, int kept, int scope_rank, const std::function<bool(int)>& 
   }
   return lo;
 }
+// Whether the randomized path's range cut a request's growth: `grown` (grown_rank's) below what
+// the scope wanted for it. Such a request goes exact where the exact path is kept.
+bool growth_capped(int grown, int r, int kept, int scope_rank) { return grown < wanted_rank(r, kept, scope_rank); }
 
 // RandomizedSvdReuse (svd.h): the kept factorization's leading components when it matches,
 // else a new one at the scope's rank for this request, kept when larger; null outside a scope.
@@ -597,7 +600,7 @@ Result<std::optional<SvdResult>> reused_randomized(ConstMapF& B, const SvdOption
   // exact path serves, where a rank past an eighth of it is factorized exactly anyway: the grown
   // randomized SVD would cost about as much as the Gram, and serve fewer ranks). The randomized
   // path's input check (svd_checks_finite) is kept: one read of B.
-  const bool capped = big.max_rank < wanted_rank(opt.max_rank, kept_rank, scope_rank);
+  const bool capped = growth_capped(big.max_rank, opt.max_rank, kept_rank, scope_rank);
   if (opt.method == SvdMethod::automatic && (gram_kept || (capped && exact_kept))) {
     if (find_non_finite(B.data(), size_t(B.size())) < size_t(B.size())) return non_finite_input();
     BTFC_ASSIGN_OR_RETURN(SvdResult r, exact_svd(B, opt, fp));
@@ -669,6 +672,11 @@ uint64_t data_fingerprint(const float* data, size_t n) {
 
 namespace {
 
+// The kept set of factorizations for `key` with n matrices, or null. Under g_reuse_mutex.
+const KeptSet* kept_set_for(uint64_t key, size_t n) {
+  return g_kept_set && g_kept_set->key == key && g_kept_set->ranks.size() == n ? g_kept_set.get() : nullptr;
+}
+
 RandomizedSvdReuse::Set leading_set(const RandomizedSvdReuse::Set& s, const std::vector<int>& ranks) {
   RandomizedSvdReuse::Set t;
   t.extra = s.extra;
@@ -686,7 +694,7 @@ Result<RandomizedSvdReuse::Set> RandomizedSvdReuse::serve_set(uint64_t key, cons
   {
     std::lock_guard<std::mutex> lock(g_reuse_mutex);
     if (g_randomized_scopes == 0) return compute(ranks);
-    const KeptSet* k = g_kept_set && g_kept_set->key == key && g_kept_set->ranks.size() == ranks.size() ? g_kept_set.get() : nullptr;
+    const KeptSet* k = kept_set_for(key, ranks.size());
     bool covered = k != nullptr;
     for (size_t i = 0; covered && i < ranks.size(); ++i) covered = k->ranks[i] >= ranks[i];
     if (covered) {
@@ -716,11 +724,11 @@ bool RandomizedSvdReuse::grows_past_randomized(uint64_t key, const std::vector<i
   {
     std::lock_guard<std::mutex> lock(g_reuse_mutex);
     if (g_randomized_scopes == 0 || g_reuse_scopes == 0) return false;
-    if (g_kept_set && g_kept_set->key == key && g_kept_set->ranks.size() == ranks.size()) kept = g_kept_set->ranks;
+    if (const KeptSet* k = kept_set_for(key, ranks.size())) kept = k->ranks;
     scope_rank = g_randomized_rank;
   }
   for (size_t i = 0; i < ranks.size(); ++i)
-    if (kept[i] < ranks[i] && grown_rank(ranks[i], kept[i], scope_rank, randomized_at) < wanted_rank(ranks[i], kept[i], scope_rank))
+    if (kept[i] < ranks[i] && growth_capped(grown_rank(ranks[i], kept[i], scope_rank, randomized_at), ranks[i], kept[i], scope_rank))
       return true;
   return false;
 }
