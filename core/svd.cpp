@@ -46,16 +46,24 @@ constexpr double k_rel_sigma_floor = 1e-6;  // float data: smaller singular valu
 
 double frobenius2(ConstMapF& B) { return squared_norm(B.data(), size_t(B.size())); }
 
-// ExactSvdReuse's store: the eigendecompositions of the last few Gram matrices, by fingerprint.
+// The exact path's projection (exact_svd) goes by panels of this many columns of E, every panel a
+// product of the same shape (the last one's missing eigenvectors zero): a column's bits then do
+// not depend on how many columns were asked for, so panels projected for one rank serve every
+// smaller one with the bits that rank gets alone (ExactSvdReuse keeps them).
+constexpr Index k_projection_panel = 32;
+
+// ExactSvdReuse's store: the eigendecompositions of the last few Gram matrices, by fingerprint,
+// and the panels of their projection computed so far (float, k_projection_panel columns each).
 struct GramEigen {
   uint64_t fingerprint = 0;
   Index m = 0, n = 0;
   Eigen::VectorXd lambda;
   MatrixXd E;
+  MatrixXfR projected;  // rows_small: SxV = B^T E (n rows); else U = B E / sigma (m rows)
 };
 std::mutex g_reuse_mutex;
 int g_reuse_scopes = 0;
-size_t g_reuses = 0;
+size_t g_reuses = 0, g_projected_columns = 0;
 std::list<GramEigen> g_reuse;  // most recent first
 constexpr size_t k_reuse_entries = 3;  // dfmf factorizes three channel matrices per encode
 
@@ -131,12 +139,56 @@ void gram_eigen(ConstMapF& B, bool rows_small, const SvdOptions& opt, Eigen::Vec
   if (opt.progress) opt.progress->advance();
 }
 
+// Appends to P (rows x a multiple of k_projection_panel) the panels of B's projection on E's
+// columns that bring it to at least `cols` columns: rows_small, P = B^T E (n rows); else P = B E
+// diag(1 / sigma) (m rows; 0 where sigma is 0: all-zero input leaves U zero), sigma = sqrt(lambda).
+// In double blocks of B as the Gram (BLAS dgemm; a product with B's cast expression ran Eigen's own
+// unblocked kernel), one dgemm of one shape per block and panel.
+void project_panels(ConstMapF& B, bool rows_small, const Eigen::VectorXd& lambda, const MatrixXd& E, Index cols, MatrixXfR& P) {
+  const Index have = P.cols(), want = (cols + k_projection_panel - 1) / k_projection_panel * k_projection_panel;
+  if (want <= have) return;
+  const Index rows = rows_small ? B.cols() : B.rows(), len = rows_small ? B.rows() : B.cols();
+  // The new panels' eigenvectors (and 1 / sigma), zero past E's columns.
+  MatrixXd V = MatrixXd::Zero(len, want - have);
+  Eigen::VectorXd inv = Eigen::VectorXd::Zero(want - have);
+  for (Index c = have; c < std::min(want, E.cols()); ++c) {
+    V.col(c - have) = E.col(c);
+    const double sigma = std::sqrt(lambda(c));
+    inv(c - have) = sigma > 0 ? 1.0 / sigma : 0.0;
+  }
+  MatrixXfR grown(rows, want);
+  grown.leftCols(have) = P;
+  const Index block = exact_double_block(len);
+  MatrixXd Bd, panel;
+  for (Index i0 = 0; i0 < rows; i0 += block) {
+    const Index nb = std::min(block, rows - i0);
+    if (rows_small)
+      Bd = B.middleCols(i0, nb).cast<double>();
+    else
+      Bd = B.middleRows(i0, nb).cast<double>();  // copied column by column: no strided transpose
+    for (Index c0 = 0; c0 < want - have; c0 += k_projection_panel) {
+      const auto Vc = V.middleCols(c0, k_projection_panel);
+      if (rows_small) {
+        panel.noalias() = Bd.transpose() * Vc;
+      } else {
+        panel.noalias() = Bd * Vc;
+        panel *= inv.segment(c0, k_projection_panel).asDiagonal();
+      }
+      grown.block(i0, have + c0, nb, k_projection_panel) = panel.cast<float>();
+    }
+  }
+  P = std::move(grown);
+  std::lock_guard<std::mutex> lock(g_reuse_mutex);
+  g_projected_columns += size_t(want - have);
+}
+
 // known_fp: B's fingerprint when the caller has taken it already (0: not taken).
 Result<SvdResult> exact_svd(ConstMapF& B, const SvdOptions& opt, uint64_t known_fp = 0) {
   const Index m = B.rows(), n = B.cols();
   const bool rows_small = m <= n;
   Eigen::VectorXd lambda;
   MatrixXd E;
+  MatrixXfR projected;
   // The lock is held to look up and to store, not while computing: codecs factorize several
   // matrices in parallel.
   bool reuse = false, reused = false;
@@ -152,6 +204,7 @@ Result<SvdResult> exact_svd(ConstMapF& B, const SvdOptions& opt, uint64_t known_
     if (it != g_reuse.end()) {
       lambda = it->lambda;
       E = it->E;
+      projected = it->projected;
       g_reuse.splice(g_reuse.begin(), g_reuse, it);
       ++g_reuses;
       reused = true;
@@ -161,13 +214,6 @@ Result<SvdResult> exact_svd(ConstMapF& B, const SvdOptions& opt, uint64_t known_
     if (opt.progress) opt.progress->start("fmf exact SVD (reused)", 1);
   } else {
     gram_eigen(B, rows_small, opt, lambda, E);
-    if (reuse) {
-      std::lock_guard<std::mutex> lock(g_reuse_mutex);
-      if (g_reuse_scopes > 0) {
-        g_reuse.push_front(GramEigen{fp, m, n, lambda, E});
-        if (g_reuse.size() > k_reuse_entries) g_reuse.pop_back();
-      }
-    }
   }
   SvdResult r;
   r.method = "exact";
@@ -176,33 +222,29 @@ Result<SvdResult> exact_svd(ConstMapF& B, const SvdOptions& opt, uint64_t known_
   const int rank = choose_rank(lambda, r.total_energy, opt, r.data_rank_limit, r.target_reached);
   r.S = lambda.head(rank).cwiseSqrt();
   r.kept_energy = lambda.head(rank).sum();
-  // The projections in double blocks of B as the Gram (BLAS dgemm; a product with B's cast
-  // expression ran Eigen's own unblocked kernel).
-  const Index block = exact_double_block(rows_small ? m : n);
-  MatrixXd Bd;
+  const Index had = projected.cols();
+  project_panels(B, rows_small, lambda, E, rank, projected);
   if (rows_small) {
     // U = top eigenvectors of B B^T; SxV = B^T U is the projection (no division by sigma).
-    const MatrixXd U = E.leftCols(rank);
-    r.U = U.cast<float>();
-    r.SxV.resize(n, rank);
-    for (Index j0 = 0; j0 < n; j0 += block) {
-      const Index nb = std::min(block, n - j0);
-      Bd = B.middleCols(j0, nb).cast<double>();
-      r.SxV.middleRows(j0, nb) = (Bd.transpose() * U).cast<float>();
-    }
+    r.U = E.leftCols(rank).cast<float>();
+    r.SxV = projected.leftCols(rank);
   } else {
-    // V = top eigenvectors of B^T B; U = B V / sigma; SxV = V sigma. Kept sigma > floor > 0,
-    // except for all-zero input, where U is left zero.
-    const MatrixXd V = E.leftCols(rank);
-    Eigen::VectorXd inv(rank);
-    for (int c = 0; c < rank; ++c) inv(c) = r.S(c) > 0 ? 1.0 / r.S(c) : 0.0;
-    r.U.resize(m, rank);
-    for (Index i0 = 0; i0 < m; i0 += block) {
-      const Index mb = std::min(block, m - i0);
-      Bd = B.middleRows(i0, mb).cast<double>();
-      r.U.middleRows(i0, mb) = ((Bd * V) * inv.asDiagonal()).cast<float>();
+    // V = top eigenvectors of B^T B; U = B V / sigma; SxV = V sigma.
+    r.U = projected.leftCols(rank);
+    r.SxV = (E.leftCols(rank) * r.S.asDiagonal()).cast<float>();
+  }
+  if (reuse && (!reused || projected.cols() > had)) {
+    std::lock_guard<std::mutex> lock(g_reuse_mutex);
+    if (g_reuse_scopes > 0) {
+      auto it =
+          std::find_if(g_reuse.begin(), g_reuse.end(), [&](const GramEigen& e) { return e.fingerprint == fp && e.m == m && e.n == n; });
+      if (it == g_reuse.end()) {
+        g_reuse.push_front(GramEigen{fp, m, n, std::move(lambda), std::move(E), std::move(projected)});
+        if (g_reuse.size() > k_reuse_entries) g_reuse.pop_back();
+      } else if (projected.cols() > it->projected.cols()) {
+        it->projected = std::move(projected);
+      }
     }
-    r.SxV = (V * r.S.asDiagonal()).cast<float>();
   }
   if (opt.progress) opt.progress->finish();
   return r;
@@ -751,6 +793,11 @@ size_t RandomizedSvdReuse::served() {
 size_t ExactSvdReuse::reuses() {
   std::lock_guard<std::mutex> lock(g_reuse_mutex);
   return g_reuses;
+}
+
+size_t ExactSvdReuse::projected_columns() {
+  std::lock_guard<std::mutex> lock(g_reuse_mutex);
+  return g_projected_columns;
 }
 
 }  // namespace btfc

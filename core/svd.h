@@ -192,7 +192,9 @@ SvdMethod resolved_method(size_t m, size_t n, const SvdOptions& opt);
 // it computes (the last three) and reuses one for a matrix of the same shape and content (a
 // 64-bit fingerprint of every value): a byte-budget search (codecs/target.h) probes fmf at many
 // ranks of one matrix, and the decomposition, which does not depend on the rank, is most of
-// each probe's cost. Results are the same with or without it. Not for concurrent searches.
+// each probe's cost. With each it keeps the projection's panels computed so far (below), so a
+// probe projects only the panels its rank adds. Results are the same with or without it. Not for
+// concurrent searches.
 class ExactSvdReuse {
  public:
   ExactSvdReuse();
@@ -200,6 +202,11 @@ class ExactSvdReuse {
   ExactSvdReuse(const ExactSvdReuse&) = delete;
   ExactSvdReuse& operator=(const ExactSvdReuse&) = delete;
   static size_t reuses();  // how many exact SVDs were served from it (tests)
+  // How many projection columns the exact path has computed, in or out of a scope (tests): the
+  // kept decompositions keep their projections too, by panels of 32 columns whose bits do not
+  // depend on the rank asked for, so a smaller rank takes leading columns and a larger one adds
+  // panels, each with the bits of its rank encoded alone.
+  static size_t projected_columns();
 };
 
 // While one of these is alive (a byte-budget search over fmf's rank, codecs/target.cpp), a

@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <cstring>
 #include <memory>
+#include <map>
 #include <random>
 #include <tuple>
 #include <string>
@@ -879,6 +880,39 @@ TEST(Svd, ReuseServesAnExactSvdAgainAtAnotherRankWithTheSameResult) {
   // Outside a scope nothing is kept.
   ASSERT_TRUE(truncated_svd(b.data(), m, n, o).ok());
   EXPECT_EQ(ExactSvdReuse::reuses(), before + 1);
+}
+
+TEST(Svd, ReuseKeepsTheProjectionByPanelsWithTheBitsOfEachRankAlone) {
+  // Both orientations (SxV = B^T E where the rows are the small side, U = B E / sigma where the
+  // columns are), ranks across several 32-column panels, asked in a search's order: large, smaller,
+  // larger. Each must equal the same rank factorized alone, bit for bit, and only new panels are
+  // projected.
+  for (const auto& [m, n] : {std::pair<size_t, size_t>{150, 220}, {230, 140}}) {
+    const std::vector<float> b = test_matrix(m, n, 120, 11);
+    SvdOptions o;
+    o.method = SvdMethod::exact;
+    std::map<int, SvdResult> alone;
+    for (int rank : {70, 40, 101, 96}) {
+      o.max_rank = rank;
+      auto r = truncated_svd(b.data(), m, n, o);
+      ASSERT_TRUE(r.ok());
+      ASSERT_EQ(r->U.cols(), rank);
+      alone[rank] = std::move(r).value();
+    }
+    const ExactSvdReuse reuse;
+    const size_t cols0 = ExactSvdReuse::projected_columns();
+    const size_t expect_cols[] = {96, 96, 128, 128};  // panels for 70, none for 40, one for 101, none for 96
+    int step = 0;
+    for (int rank : {70, 40, 101, 96}) {
+      o.max_rank = rank;
+      auto r = truncated_svd(b.data(), m, n, o);
+      ASSERT_TRUE(r.ok());
+      EXPECT_EQ(ExactSvdReuse::projected_columns() - cols0, expect_cols[step++]) << m << " x " << n << " rank " << rank;
+      EXPECT_EQ(r->U, alone[rank].U) << m << " x " << n << " rank " << rank;
+      EXPECT_EQ(r->SxV, alone[rank].SxV) << m << " x " << n << " rank " << rank;
+      EXPECT_EQ(r->S, alone[rank].S);
+    }
+  }
 }
 
 }  // namespace
