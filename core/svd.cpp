@@ -157,7 +157,7 @@ void project_panels(ConstMapF& B, bool rows_small, const Eigen::VectorXd& lambda
     inv(c - have) = sigma > 0 ? 1.0 / sigma : 0.0;
   }
   MatrixXfR grown(rows, want);
-  grown.leftCols(have) = P;
+  if (have > 0) grown.leftCols(have) = P;  // (P is 0 x 0 before the first panel)
   const Index block = exact_double_block(len);
   MatrixXd Bd, panel;
   for (Index i0 = 0; i0 < rows; i0 += block) {
