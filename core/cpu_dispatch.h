@@ -40,8 +40,11 @@ bool cpu_has_avx512f();
 // kernel (target("avx2,fma")), for CPUs without AVX-512 (core/thin_product.cpp,
 // codecs/fmf/fmf_eval.cpp).
 bool cpu_has_avx2_fma();
-// Whether this is an Intel CPU (tested once): the one kernel choice made by vendor, B X's
-// (core/thin_product.cpp), where the two vendors measured differ.
+// Whether this is an Intel CPU (tested once): B X's kernel is chosen by vendor and model
+// (core/thin_product.cpp), where the CPUs measured differ.
 bool cpu_is_intel();
+// Whether this is an AMD Zen 1 / Zen+ (family 17h before Zen 2; its 256-bit operations run as two
+// 128-bit halves), tested once: the CPU without AVX-512 where B X's AVX2 tiles beat OpenBLAS.
+bool cpu_is_zen1();
 
 }  // namespace btfc

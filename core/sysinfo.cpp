@@ -80,6 +80,18 @@ bool cpu_is_intel() {
 #endif
 }
 
+bool cpu_is_zen1() {
+#if defined(__x86_64__) && defined(__GNUC__)
+  static const bool yes = [] {
+    __builtin_cpu_init();
+    return __builtin_cpu_is("znver1") != 0;
+  }();
+  return yes;
+#else
+  return false;
+#endif
+}
+
 bool cpu_has_avx2_fma() {
 #if defined(__x86_64__) && defined(__GNUC__)
   static const bool yes = [] {

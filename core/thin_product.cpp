@@ -217,22 +217,57 @@ __attribute__((target("avx512f"))) void nn_tile_avx512(const float* B, size_t ld
     for (int t = 0; t < TK; ++t) _mm512_storeu_ps(Y + (c0 + c) * ldy + k + 16 * t, acc[t][c]);
 }
 
-// Rows [0, m / R * R) of Yp (m x lp column-major, leading dimension ldy); Xr: n x lp row-major, lp a
-// multiple of CC.
+// The same tile for AVX2 (8 lanes, 16 registers: TK x CC accumulators + TK of B + 1 broadcast
+// <= 16): 2 x 6 as BLIS's Haswell sgemm kernel (16 rows x 6 columns), or 3 x 4. Run on Zen 1
+// only (thin_product below), where OpenBLAS's B X ran at 33-41 GFLOP/s at l = 36-48 and the
+// AVX2 B^T Y at 66-71 (docs/benchmarks.md, 2026-12-07).
 template <int TK, int CC>
+__attribute__((target("avx2,fma"))) void nn_tile_avx2(const float* B, size_t ldb, const float* Xr, size_t lp, size_t k, size_t j0,
+                                                      size_t j1, size_t c0, float* Y, size_t ldy, bool first, bool prefetch) {
+  constexpr size_t R = 8 * TK;
+  __m256 acc[TK][CC];
+#pragma GCC unroll 8
+  for (int c = 0; c < CC; ++c)
+#pragma GCC unroll 4
+    for (int t = 0; t < TK; ++t) acc[t][c] = first ? _mm256_setzero_ps() : _mm256_loadu_ps(Y + (c0 + c) * ldy + k + 8 * t);
+  for (size_t j = j0; j < j1; ++j) {
+    const float* bc = B + j * ldb + k;
+    if (prefetch)
+#pragma GCC unroll 4
+      for (int t = 0; t < TK; ++t) _mm_prefetch(reinterpret_cast<const char*>(bc + k_nn_ahead * R + 8 * t), _MM_HINT_T0);
+    __m256 b[TK];
+#pragma GCC unroll 4
+    for (int t = 0; t < TK; ++t) b[t] = _mm256_loadu_ps(bc + 8 * t);
+    const float* xr = Xr + j * lp + c0;
+#pragma GCC unroll 8
+    for (int c = 0; c < CC; ++c) {
+      const __m256 x = _mm256_broadcast_ss(xr + c);
+#pragma GCC unroll 4
+      for (int t = 0; t < TK; ++t) acc[t][c] = _mm256_fmadd_ps(b[t], x, acc[t][c]);
+    }
+  }
+#pragma GCC unroll 8
+  for (int c = 0; c < CC; ++c)
+#pragma GCC unroll 4
+    for (int t = 0; t < TK; ++t) _mm256_storeu_ps(Y + (c0 + c) * ldy + k + 8 * t, acc[t][c]);
+}
+
+// Rows [0, m / R * R) of Yp (m x lp column-major, leading dimension ldy) through Tile, R rows by
+// CC columns; Xr: n x lp row-major, lp a multiple of CC. Each output sums its texels in order.
+using NnTile = void (*)(const float*, size_t, const float*, size_t, size_t, size_t, size_t, size_t, float*, size_t, bool, bool);
+template <size_t R, size_t CC, NnTile Tile>
 void thin_nn(const float* B, size_t ldb, size_t m, size_t n, const float* Xr, size_t lp, float* Yp, size_t ldy) {
-  constexpr size_t R = 16 * TK;
-  static_assert(k_nn_rows % R == 0, "a task holds whole row tiles");
+  constexpr size_t rows = k_nn_rows / R * R;  // a task holds whole row tiles
   const size_t mfull = m / R * R;
-  const int64_t tasks = int64_t((mfull + k_nn_rows - 1) / k_nn_rows);
+  const int64_t tasks = int64_t((mfull + rows - 1) / rows);
 #pragma omp parallel for schedule(dynamic, 1)
   for (int64_t s = 0; s < tasks; ++s) {
-    const size_t k0 = size_t(s) * k_nn_rows, k1 = std::min(mfull, k0 + k_nn_rows);
+    const size_t k0 = size_t(s) * rows, k1 = std::min(mfull, k0 + rows);
     for (size_t j0 = 0; j0 < n; j0 += k_nn_texels) {
       const size_t j1 = std::min(n, j0 + k_nn_texels);
       for (size_t k = k0; k < k1; k += R) {
         const bool prefetch = k + (k_nn_ahead + 1) * R <= m;
-        for (size_t c0 = 0; c0 < lp; c0 += CC) nn_tile_avx512<TK, CC>(B, ldb, Xr, lp, k, j0, j1, c0, Yp, ldy, j0 == 0, prefetch && c0 == 0);
+        for (size_t c0 = 0; c0 < lp; c0 += CC) Tile(B, ldb, Xr, lp, k, j0, j1, c0, Yp, ldy, j0 == 0, prefetch && c0 == 0);
       }
     }
   }
@@ -451,14 +486,19 @@ bool transposed_product_avx2(const float* B, size_t m, size_t n, const ConstRefF
 
 namespace {
 
-// Y = B X through the AVX-512 tiles (thin_nn); false where they do not apply (Y not written).
-bool nn_tiles(const float* B, size_t ldb, size_t m, size_t n, const ConstRefF& X, Eigen::Ref<Eigen::MatrixXf> Y) {
+// Y = B X through the tiles of one instruction set (thin_nn); false where they do not apply (Y
+// not written).
+enum class NnIsa { avx512, avx2 };
+bool nn_tiles(NnIsa isa, const float* B, size_t ldb, size_t m, size_t n, const ConstRefF& X, Eigen::Ref<Eigen::MatrixXf> Y) {
 #ifdef BTFC_THIN_AVX512
   const Index l = X.cols();
-  constexpr size_t R = 32;  // rows per tile (TK = 2)
-  if (!cpu_has_avx512f() || l < 1 || l > 128 || m < R || n < 1) return false;
-  // 12 or 8 columns per tile, whichever pads l less (12: fewer re-reads of B's tile).
-  const Index cc = (l + 11) / 12 * 12 <= (l + 7) / 8 * 8 ? 12 : 8, lp = (l + cc - 1) / cc * cc;
+  const bool wide = isa == NnIsa::avx512;
+  if (!(wide ? cpu_has_avx512f() : cpu_has_avx2_fma()) || l < 1 || l > 128 || m < (wide ? 32 : 24) || n < 1) return false;
+  // Columns per tile, whichever pads l less: AVX-512 12 or 8 (12: fewer re-reads of B's tile),
+  // AVX2 6 (2 x 8 rows) or 4 (3 x 8 rows; 12 accumulators either way, of its 16 registers).
+  const Index wider = wide ? 12 : 6, narrower = wide ? 8 : 4;
+  const Index cc = (l + wider - 1) / wider * wider <= (l + narrower - 1) / narrower * narrower ? wider : narrower;
+  const Index lp = (l + cc - 1) / cc * cc;
   // X row-major and padded in the staging buffer; Y written in place where l needs no padding,
   // else through an m x lp block there. Fresh pages for that block on every call (a pass's
   // parts) faulted for 5 % of a color=dfmf encode's power pass (docs/benchmarks.md).
@@ -469,15 +509,22 @@ bool nn_tiles(const float* B, size_t ldb, size_t m, size_t n, const ConstRefF& X
   Xr.rightCols(lp - l).setZero();
   float* const yp = direct ? Y.data() : staging.data() + n * size_t(lp);
   const size_t ldy = direct ? size_t(Y.outerStride()) : m;
-  if (cc == 12) thin_nn<2, 12>(B, ldb, m, n, Xr.data(), size_t(lp), yp, ldy);
-  else thin_nn<2, 8>(B, ldb, m, n, Xr.data(), size_t(lp), yp, ldy);
-  const Index mfull = Index(m / R * R), tail = Index(m) - mfull;
+  if (!wide && cc == 4)
+    thin_nn<24, 4, nn_tile_avx2<3, 4>>(B, ldb, m, n, Xr.data(), size_t(lp), yp, ldy);
+  else if (!wide)
+    thin_nn<16, 6, nn_tile_avx2<2, 6>>(B, ldb, m, n, Xr.data(), size_t(lp), yp, ldy);
+  else if (cc == 12)
+    thin_nn<32, 12, nn_tile_avx512<2, 12>>(B, ldb, m, n, Xr.data(), size_t(lp), yp, ldy);
+  else
+    thin_nn<32, 8, nn_tile_avx512<2, 8>>(B, ldb, m, n, Xr.data(), size_t(lp), yp, ldy);
+  const size_t rows = wide ? 32 : cc == 4 ? 24 : 16;  // the tile's rows
+  const Index mfull = Index(m / rows * rows), tail = Index(m) - mfull;
   if (!direct) Y.topRows(mfull) = Eigen::Map<const Eigen::MatrixXf>(yp, Index(m), lp).topLeftCorner(mfull, l);
   ConstStridedF map(B, Index(m), Index(n), Eigen::OuterStride<>(Index(ldb)));
   if (tail > 0) Y.bottomRows(tail).noalias() = map.bottomRows(tail) * X;
   return true;
 #else
-  (void)B, (void)ldb, (void)m, (void)n, (void)X, (void)Y;
+  (void)isa, (void)B, (void)ldb, (void)m, (void)n, (void)X, (void)Y;
   return false;
 #endif
 }
@@ -487,15 +534,25 @@ bool nn_tiles(const float* B, size_t ldb, size_t m, size_t n, const ConstRefF& X
 // The tiles on AMD's AVX-512 CPUs (Zen 5: 280-290 GFLOP/s against OpenBLAS's 210-270); on Intel's
 // OpenBLAS's SkylakeX sgemm, which packs B but still beat them on a 2-core Xeon VM (a whole rank-32
 // q 1 SVD of the UBO2003-size matrix 1.78 s against 2.04-2.13 s; docs/benchmarks.md, 2026-12-04).
+// Without AVX-512, the AVX2 tiles on Zen 1: on a 2-core EPYC (family 17h model 1) 1.3-1.7 x
+// OpenBLAS's ZEN kernels' rate at l = 24-64, never slower at l = 8-128; but on a Zen 3 OpenBLAS's
+// kernels beat the same tiling (146-176 against 113-124 GFLOP/s at l = 40-128), and other AVX2
+// CPUs were not measured, so they keep OpenBLAS (docs/benchmarks.md, 2026-12-04 and 2026-12-07).
 void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::Ref<Eigen::MatrixXf> Y, size_t ldb) {
   if (ldb == 0) ldb = m;
-  if (!cpu_is_intel() && nn_tiles(B, ldb, m, n, X, Y)) return;
+  if (!cpu_is_intel() && nn_tiles(NnIsa::avx512, B, ldb, m, n, X, Y)) return;
+  if (cpu_is_zen1() && nn_tiles(NnIsa::avx2, B, ldb, m, n, X, Y)) return;
   eigen_nn(B, ldb, m, n, X, Y);
 }
 
 bool thin_product_tiles(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::MatrixXf& Y, size_t ldb) {
   Y.resize(Index(m), X.cols());
-  return nn_tiles(B, ldb ? ldb : m, m, n, X, Y);
+  return nn_tiles(NnIsa::avx512, B, ldb ? ldb : m, m, n, X, Y);
+}
+
+bool thin_product_avx2(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::MatrixXf& Y, size_t ldb) {
+  Y.resize(Index(m), X.cols());
+  return nn_tiles(NnIsa::avx2, B, ldb ? ldb : m, m, n, X, Y);
 }
 
 double squared_norm(const float* B, size_t count) {

@@ -6,12 +6,13 @@
 // layout on every call, which for l = 32-80 columns is a large part of the product's time, and
 // its thread pool spins beside the OpenMP one (docs/benchmarks.md, "fmf factorization"). These
 // kernels read B once, stream it sequentially with software prefetch, and keep the small
-// operand in L1/L2. They are AVX-512, chosen at run time, plus an AVX2 B^T Y for l <= 96;
-// elsewhere (another CPU, wider l, and B X without AVX-512 or on Intel CPUs: thin_product.cpp)
+// operand in L1/L2. They are AVX-512 or AVX2, chosen at run time: B^T Y for l <= 128 in
+// AVX-512, <= 96 in AVX2; B X for l <= 128 in AVX-512 on AMD CPUs, in AVX2 on Zen 1 only, where
+// they were measured faster than OpenBLAS. Elsewhere (another CPU, wider l: thin_product.cpp)
 // the products are Eigen products (OpenBLAS when linked) on slices of B in OpenMP threads, one
-// BLAS thread each (OpenBLAS's own pool spins against the OpenMP threads of the code around). Float sums in a fixed order per
-// output, so a result does not depend on the thread count; within GEMM round-off of the
-// reference products.
+// BLAS thread each (OpenBLAS's own pool spins against the OpenMP threads of the code around).
+// Float sums in a fixed order per output, so a result does not depend on the thread count;
+// within GEMM round-off of the reference products.
 #pragma once
 #include <Eigen/Core>
 #include <cstddef>
@@ -66,6 +67,9 @@ void thin_product(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen:
 // For tests: thin_product through the AVX-512 tiles on any CPU with AVX-512 (Intel's take
 // OpenBLAS in thin_product). Returns false where the tiles do not apply (Y resized, not written).
 bool thin_product_tiles(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::MatrixXf& Y, size_t ldb = 0);
+// For tests: thin_product through the AVX2 tiles (the ones Zen 1 CPUs run) on any CPU
+// with AVX2 + FMA. Returns false where they do not apply (Y resized, not written).
+bool thin_product_avx2(const float* B, size_t m, size_t n, const ConstRefF& X, Eigen::MatrixXf& Y, size_t ldb = 0);
 
 // ||B||_F^2 over `count` floats, summed in double (vectorized, parallel, fixed block order).
 double squared_norm(const float* B, size_t count);

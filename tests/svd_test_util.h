@@ -1,9 +1,11 @@
-// Matrices at the extremes for the SVD tests (svd_test.cpp: the in-core sparse start,
-// ooc_test.cpp: the streamed Krylov SVD) and the checks both run against the exact SVD.
+// Matrices for the SVD tests (svd_test.cpp, svd_reuse_test.cpp: a fast and a slow spectral decay;
+// svd_test.cpp: the in-core sparse start and ooc_test.cpp: the streamed Krylov SVD at the
+// extremes) and the checks they run against the exact SVD.
 #pragma once
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <string>
@@ -12,6 +14,36 @@
 #include "core/svd.h"
 
 namespace btfc::test {
+
+// m x n column-major: rank-r structure with geometrically falling singular values plus noise.
+inline std::vector<float> test_matrix(size_t m, size_t n, int r, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<float> g(0.f, 1.f);
+  Eigen::MatrixXf U(m, r), V(n, r);
+  for (Eigen::Index i = 0; i < U.size(); ++i) U.data()[i] = g(rng);
+  for (Eigen::Index i = 0; i < V.size(); ++i) V.data()[i] = g(rng);
+  for (int c = 0; c < r; ++c) U.col(c) *= std::pow(0.8f, float(c));
+  Eigen::MatrixXf B = U * V.transpose();
+  for (Eigen::Index i = 0; i < B.size(); ++i) B.data()[i] += 1e-3f * g(rng);
+  return std::vector<float>(B.data(), B.data() + B.size());
+}
+
+// A slowly decaying spectrum, where power iterations need many passes: sigma_i = 1 / (1 + i)
+// over the whole small side, with random singular vectors. Returns B and its exact singular values.
+inline std::vector<float> slow_decay_matrix(size_t m, size_t n, uint64_t seed, Eigen::VectorXd& sigma) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> g(0.0, 1.0);
+  const Eigen::Index k = Eigen::Index(std::min(m, n));
+  Eigen::MatrixXd A(m, k), C(n, k);
+  for (Eigen::Index i = 0; i < A.size(); ++i) A.data()[i] = g(rng);
+  for (Eigen::Index i = 0; i < C.size(); ++i) C.data()[i] = g(rng);
+  const Eigen::MatrixXd U = Eigen::HouseholderQR<Eigen::MatrixXd>(A).householderQ() * Eigen::MatrixXd::Identity(Eigen::Index(m), k);
+  const Eigen::MatrixXd V = Eigen::HouseholderQR<Eigen::MatrixXd>(C).householderQ() * Eigen::MatrixXd::Identity(Eigen::Index(n), k);
+  sigma.resize(k);
+  for (Eigen::Index i = 0; i < k; ++i) sigma(i) = 1.0 / (1.0 + double(i));
+  const Eigen::MatrixXf B = (U * sigma.asDiagonal() * V.transpose()).cast<float>();
+  return std::vector<float>(B.data(), B.data() + B.size());
+}
 
 struct NamedMatrix {
   const char* name;
