@@ -66,6 +66,10 @@ int g_reuse_scopes = 0;
 size_t g_reuses = 0, g_projected_columns = 0;
 std::list<GramEigen> g_reuse;  // most recent first
 constexpr size_t k_reuse_entries = 3;  // dfmf factorizes three channel matrices per encode
+// The store's entry for a matrix of fingerprint fp and shape m x n, or end(); g_reuse_mutex held.
+std::list<GramEigen>::iterator find_gram(uint64_t fp, Index m, Index n) {
+  return std::find_if(g_reuse.begin(), g_reuse.end(), [&](const GramEigen& e) { return e.fingerprint == fp && e.m == m && e.n == n; });
+}
 
 // RandomizedSvdReuse's store: one randomized factorization, the largest computed in the scope.
 struct KeptRandomized {
@@ -200,7 +204,7 @@ Result<SvdResult> exact_svd(ConstMapF& B, const SvdOptions& opt, uint64_t known_
   if (reuse) {
     fp = known_fp ? known_fp : fingerprint(B);
     std::lock_guard<std::mutex> lock(g_reuse_mutex);
-    auto it = std::find_if(g_reuse.begin(), g_reuse.end(), [&](const GramEigen& e) { return e.fingerprint == fp && e.m == m && e.n == n; });
+    auto it = find_gram(fp, m, n);
     if (it != g_reuse.end()) {
       lambda = it->lambda;
       E = it->E;
@@ -236,8 +240,7 @@ Result<SvdResult> exact_svd(ConstMapF& B, const SvdOptions& opt, uint64_t known_
   if (reuse && (!reused || projected.cols() > had)) {
     std::lock_guard<std::mutex> lock(g_reuse_mutex);
     if (g_reuse_scopes > 0) {
-      auto it =
-          std::find_if(g_reuse.begin(), g_reuse.end(), [&](const GramEigen& e) { return e.fingerprint == fp && e.m == m && e.n == n; });
+      auto it = find_gram(fp, m, n);
       if (it == g_reuse.end()) {
         g_reuse.push_front(GramEigen{fp, m, n, std::move(lambda), std::move(E), std::move(projected)});
         if (g_reuse.size() > k_reuse_entries) g_reuse.pop_back();
@@ -625,9 +628,7 @@ Result<std::optional<SvdResult>> reused_randomized(ConstMapF& B, const SvdOption
       }
     }
     exact_kept = g_reuse_scopes > 0;
-    gram_kept = exact_kept && std::any_of(g_reuse.begin(), g_reuse.end(), [&](const GramEigen& e) {
-                  return e.fingerprint == fp && e.m == B.rows() && e.n == B.cols();
-                });
+    gram_kept = exact_kept && find_gram(fp, B.rows(), B.cols()) != g_reuse.end();
   }
   SvdOptions big = opt;
   big.max_rank = grown_rank(opt.max_rank, kept_rank, scope_rank, [&](int rank) {
