@@ -254,9 +254,10 @@ __attribute__((target("avx2,fma"))) void nn_tile_avx2(const float* B, size_t ldb
 
 // Rows [0, m / R * R) of Yp (m x lp column-major, leading dimension ldy) through Tile, R rows by
 // CC columns; Xr: n x lp row-major, lp a multiple of CC. Each output sums its texels in order.
+// Returns m / R * R, the rows written (the caller computes the rest).
 using NnTile = void (*)(const float*, size_t, const float*, size_t, size_t, size_t, size_t, size_t, float*, size_t, bool, bool);
 template <size_t R, size_t CC, NnTile Tile>
-void thin_nn(const float* B, size_t ldb, size_t m, size_t n, const float* Xr, size_t lp, float* Yp, size_t ldy) {
+size_t thin_nn(const float* B, size_t ldb, size_t m, size_t n, const float* Xr, size_t lp, float* Yp, size_t ldy) {
   constexpr size_t rows = k_nn_rows / R * R;  // a task holds whole row tiles
   const size_t mfull = m / R * R;
   const int64_t tasks = int64_t((mfull + rows - 1) / rows);
@@ -271,6 +272,7 @@ void thin_nn(const float* B, size_t ldb, size_t m, size_t n, const float* Xr, si
       }
     }
   }
+  return mfull;
 }
 #endif
 
@@ -509,16 +511,10 @@ bool nn_tiles(NnIsa isa, const float* B, size_t ldb, size_t m, size_t n, const C
   Xr.rightCols(lp - l).setZero();
   float* const yp = direct ? Y.data() : staging.data() + n * size_t(lp);
   const size_t ldy = direct ? size_t(Y.outerStride()) : m;
-  if (!wide && cc == 4)
-    thin_nn<24, 4, nn_tile_avx2<3, 4>>(B, ldb, m, n, Xr.data(), size_t(lp), yp, ldy);
-  else if (!wide)
-    thin_nn<16, 6, nn_tile_avx2<2, 6>>(B, ldb, m, n, Xr.data(), size_t(lp), yp, ldy);
-  else if (cc == 12)
-    thin_nn<32, 12, nn_tile_avx512<2, 12>>(B, ldb, m, n, Xr.data(), size_t(lp), yp, ldy);
-  else
-    thin_nn<32, 8, nn_tile_avx512<2, 8>>(B, ldb, m, n, Xr.data(), size_t(lp), yp, ldy);
-  const size_t rows = wide ? 32 : cc == 4 ? 24 : 16;  // the tile's rows
-  const Index mfull = Index(m / rows * rows), tail = Index(m) - mfull;
+  const auto tiles = !wide      ? (cc == 4 ? thin_nn<24, 4, nn_tile_avx2<3, 4>> : thin_nn<16, 6, nn_tile_avx2<2, 6>>)
+                     : cc == 12 ? thin_nn<32, 12, nn_tile_avx512<2, 12>>
+                                : thin_nn<32, 8, nn_tile_avx512<2, 8>>;
+  const Index mfull = Index(tiles(B, ldb, m, n, Xr.data(), size_t(lp), yp, ldy)), tail = Index(m) - mfull;
   if (!direct) Y.topRows(mfull) = Eigen::Map<const Eigen::MatrixXf>(yp, Index(m), lp).topLeftCorner(mfull, l);
   ConstStridedF map(B, Index(m), Index(n), Eigen::OuterStride<>(Index(ldb)));
   if (tail > 0) Y.bottomRows(tail).noalias() = map.bottomRows(tail) * X;
