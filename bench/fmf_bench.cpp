@@ -102,12 +102,16 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "%s\n", r.status().message().c_str());
       std::exit(3);
     }
-    // Passes over B: 2q + 2 for power, 2 per block for krylov; all GEMMs of width l = rank +
-    // oversample except krylov's first with the sparse sketch (one add per element; svd.h).
-    const int passes = scheme == RandomizedScheme::power ? 2 * q + 2 : 2 * r->iterations;
+    // Passes over B: 2q + 2 for power, 2 per block for krylov; power's GEMMs all of width l =
+    // rank + oversample, krylov's sketch (unless sparse: one add per element) and first B^T Q
+    // of width l, its later passes of width min(l, rank) from q 2 on (svd.h narrow_krylov_blocks).
+    const bool power = scheme == RandomizedScheme::power;
+    const int passes = power ? 2 * q + 2 : 2 * r->iterations;
     const bool sparse = r->sparse_start;
     const int gemms = passes - (sparse ? 1 : 0);
-    const double l = double(rank + p), flops = gemms * 2.0 * double(m) * double(n) * l;
+    const double l = double(rank + p), lk = narrow_krylov_blocks(q + 1) ? std::min(l, double(rank)) : l;
+    const double cols = power ? gemms * l : (sparse ? 0 : l) + l + (passes - 2) * lk;
+    const double flops = 2.0 * double(m) * double(n) * cols;
     std::printf("%-10s rank %d q %d p %d %s: %.2f s, rel L2 error %.6f, %d passes (%d GEMMs), %.0f GFLOP/s over the whole run, peak RSS %.2f GB (%.2f x input)\n",
                 label, rank, q, p, scheme == RandomizedScheme::power ? "power" : (sparse ? "krylov" : "krylov_dense"), secs,
                 r->rel_error_estimate(), passes, gemms, flops / secs / 1e9, peak_rss_gb(), peak_rss_gb() / input_gb);

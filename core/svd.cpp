@@ -343,6 +343,18 @@ namespace {
 // at least two blocks, when a block improved that error by less than k_krylov_stop of itself
 // (the remaining gap to the optimum then is a fraction of that), and before the basis would
 // exceed the small side of B (k_krylov_stop, svd.h).
+//
+// With q >= 2 (three blocks or more: narrow_krylov_blocks, svd.h) only the first block is l = C
+// + oversample wide. Block 2 starts from B B^T Q_1 E, E the top lk = C eigenvectors of W_1 W_1^T
+// (Q_1 E: the first block's top C Ritz vectors), and every later block is C wide, started from
+// all of the block before: the basis is Q_1 plus the block Krylov space K_k(B B^T, B B^T Q_1 E).
+// The oversampled first block gives the start its accuracy; the later passes cost C columns, not
+// l. At UBO2003 size (docs/benchmarks.md) rank 32 and 64 at q 4, p 16 reach the same error in as
+// many passes, 21-24 % faster. Not at q = 1: there the narrow block 2 is the last one and costs
+// accuracy (rank 32 p 8: 1.0155 x the optimum against 1.0092), which more oversampling buys back
+// for ~3 % of the time in core and none in the stream (ooc_svd.h, whose pass 1 is l wide either
+// way). Taking Q_1's columns in the sketch's order instead of the Ritz vectors' (no
+// eigenvectors, as one read per block would allow) lost 1-2 % of error: not used.
 
 // out = A M (rows x cols, float) for a tall A (float or double), in blocks of rows: the double
 // product of a block at a time, so no rows x cols double temporary (its fresh pages cost more
@@ -390,29 +402,32 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
   // columns, in double) that one thread ran for most of a rank-1024 SVD (docs/benchmarks.md).
   const SingleThreadedBlas one_blas_thread(l < 256);
 
+  // Blocks after the first hold lk = min(l, C) columns when there can be three blocks or more,
+  // started from the top lk Ritz vectors of the first block (the comment above).
+  const Index lk = narrow_krylov_blocks(max_blocks) ? std::min<Index>(l, Index(opt.max_rank)) : l;
   // Few and small buffers, allocated once: fresh memory costs its page faults (1-6 ms per MB on
   // the VMs measured, docs/benchmarks.md), a sizeable part of a pass. W^T is the passes' own
   // float output (no double copy: the Gram matrix and the Ritz step convert it by blocks), and
   // block i's B^T Q_i is also the next block's B X operand.
-  const Index width = Index(max_blocks) * l;
+  const Index width = l + Index(max_blocks - 1) * lk;
   PageMatrix<double> q_buf(m, width);
   PageMatrix<float> wt_buf(n, width);
   {  // the first two blocks, which every run fills, faulted on all threads (core/memory.h)
-    const size_t used = size_t(std::min(width, 2 * l));
+    const size_t used = size_t(std::min(width, l + lk));
     page_touch((*q_buf).data(), size_t(m) * used * sizeof(double));
     page_touch((*wt_buf).data(), size_t(n) * used * sizeof(float));
   }
-  auto& Q = *q_buf;    // the orthonormal Krylov basis, l columns per block
+  auto& Q = *q_buf;    // the orthonormal Krylov basis: l columns, then lk per block
   auto& Wt = *wt_buf;  // B^T Q, block by block
   MatrixXd G(width, width);  // W W^T = Wt^T Wt in double, grown block by block
-  MatrixXf Y(m, l), Qf(m, l);
+  MatrixXf Y(m, l), Qf(m, l), X1;
   {
     const Sketch sketch = make_column_sketch(size_t(n), l, opt);
     r.sparse_start = sketch.sparse();
     r.total_energy = 0;
     column_sketch_product(B.data(), size_t(m), size_t(n), sketch, Y, &r.total_energy);  // B Pi, and ||B||_F^2
   }
-  if (!std::isfinite(r.total_energy)) return non_finite_input();  // truncated_svd's contract (svd.h)
+  if (!std::isfinite(r.total_energy)) return non_finite_input();
   step();
   int blocks = 0;
   Index g_cols = 0;  // columns of G filled
@@ -423,13 +438,14 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
     G.block(g_cols, 0, w - g_cols, g_cols) = part.topRows(g_cols).transpose();
     g_cols = w;
   };
+  Index used = 0, bw = l;  // columns before the block, the block's
   while (true) {
-    const Index used = Index(blocks) * l, w = used + l;
-    auto X = Q.middleCols(used, l);
-    X = Y.cast<double>();
+    const Index w = used + bw;
+    auto X = Q.middleCols(used, bw);
+    X = Y.leftCols(bw).cast<double>();
     orthonormalize_against(Q, used, X);
-    Qf = X.cast<float>();
-    product_bt(B, Qf, Wt.middleCols(used, l));  // n x l
+    Qf.leftCols(bw) = X.cast<float>();
+    product_bt(B, Qf.leftCols(bw), Wt.middleCols(used, bw));  // n x bw
     step();
     ++blocks;
     grow_gram(w);
@@ -437,19 +453,30 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
     // Error-driven stop: the rank-C error of the current basis, from the eigenvalues of W W^T
     // (in double: the residual is a small difference of large sums).
     Eigen::VectorXd ev;
-    symmetric_eigen(G.topLeftCorner(w, w), ev, nullptr);
+    MatrixXd vecs;
+    const bool select = bw > lk;  // the first block, when wider than the later ones
+    symmetric_eigen(G.topLeftCorner(w, w), ev, select ? &vecs : nullptr);
     const Index c = std::min<Index>(opt.max_rank, w);
     const double kept = ev.tail(c).cwiseMax(0.0).sum();
     const double err = r.total_energy > 0 ? std::sqrt(std::max(0.0, r.total_energy - kept) / r.total_energy) : 0;
     if (blocks >= 2 && last_err - err <= k_krylov_stop * err) break;
     last_err = err;
-    // The next block's start, B B^T Q_i. B^T Q_i as it is (its columns' scales, ~ the singular
-    // values, do not cost float accuracy: each column of the product is its own sum), as the
-    // streamed SVD does; the block is made orthonormal, in double, after the product.
-    product_b(B, Wt.middleCols(used, l), Y);  // m x l
+    // The next block's start, B B^T Q_i (B^T Q_i as it is: its columns' scales, ~ the singular
+    // values, do not cost float accuracy, each column of the product being its own sum), or
+    // B B^T (Q_1 E) for the first block's top lk Ritz vectors Q_1 E (ascending eigenvalues: E is
+    // the last lk eigenvectors; B^T Q_1 E = W_1^T E). The block is made orthonormal, in double,
+    // after the product.
+    if (select) {
+      X1 = Wt.leftCols(w) * vecs.rightCols(lk).cast<float>();
+      product_b(B, X1, Y.leftCols(lk));  // m x lk
+    } else {
+      product_b(B, Wt.middleCols(used, bw), Y.leftCols(bw));  // m x bw
+    }
     step();
+    used = w;
+    bw = lk;
   }
-  const Index w = Index(blocks) * l;
+  const Index w = used + bw;
   r.iterations = blocks;
   Eigen::VectorXd lambda;
   MatrixXd E;

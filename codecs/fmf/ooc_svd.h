@@ -12,7 +12,11 @@
 //                 the buffer each chunk adds its B_c S_c G); Q_1 = orth(Y)
 //   pass b        Y = B Z with Z = B^T Q_b (per chunk, while it is in memory); Z is kept: it is
 //                 block b of W^T = B^T P. Q_{b+1} = orth(Y) against the kept blocks (svd.h,
-//                 orthonormalize_against), P = [Q_1 .. Q_{b+1}] (m x (b + 1) l, double)
+//                 orthonormalize_against), P = [Q_1 .. Q_{b+1}] (m x (l + b lk), double). The
+//                 later blocks are lk = min(l, C) wide for q >= 2, as in core (svd.h
+//                 narrow_krylov_blocks; else lk = l): Q_2 = orth(Y E) for the top lk
+//                 eigenvectors E of Q_1^T Y = Q_1^T B B^T Q_1 (B B^T on Q_1's top Ritz vectors),
+//                 so pass 1 is l wide and the later ones lk
 //   last pass     the newest block's B^T Q (one product) completes W^T; G = W W^T
 //   then          G = E Lambda E^T, U = P E_k, SxV = W^T E_k   (k by choose_rank)
 // At most q + 1 blocks (q + 2 reads, as many as the power iterations this replaced). The
@@ -20,8 +24,8 @@
 // blocks so far is known without a pass (its newest block column is P^T Y), so is the rank-C
 // error of that basis, and once a block gains at most k_krylov_stop of it the basis takes
 // Q_{b+1} (free) and the last pass follows. Under a tight memory limit P holds only kept_blocks
-// blocks: when full, it restarts from its best (kept - 1) l Ritz vectors P E (and W^T from W^T E),
-// then adds the next block (kept 1: the power iterations). The in-core path (svd.cpp) runs the
+// blocks: when full, it restarts from its best l + (kept - 2) lk Ritz vectors P E (and W^T from
+// W^T E), then adds the next block (kept 1: the best l - lk, then power iterations of lk). The in-core path (svd.cpp) runs the
 // same iteration from the same Pi, so with every block kept both build the same basis (the same
 // error to float rounding); tests/ooc_test.cpp checks both against each other and against the
 // exact SVD.
