@@ -40,7 +40,7 @@ struct StreamPlan {
   bool exact = false;        // every block by streaming_exact_svd (2 passes), else streaming_svd
   uint64_t rows = 0;         // rows of each factorized matrix: abrdf_size, or num_images (dfmf)
   uint64_t l = 0;            // randomized sketch width: max rank + oversample, <= min(rows, texels)
-  int kept_blocks = 1;       // randomized: Krylov blocks of l held at once (streaming_svd's kept_blocks)
+  int kept_blocks = 1;       // randomized: Krylov blocks (of at most l) held at once (streaming_svd's kept_blocks)
   bool sketch_sums = false;  // randomized: the first pass sums B S over the chunks (SvdOptions::sketch_sums)
   int passes = 0;            // passes over the chunks in all (exact dfmf: x 3)
   uint64_t fixed_bytes = 0;  // memory besides the chunk buffers (Gram or sketch, SxV, finished blocks)
