@@ -26,7 +26,7 @@ const ParamSpec k_params[] = {
     {"target_error", ParamSpec::Type::real, "0", 0, 1, {}, "if > 0: smallest rank whose relative L2 error of the data (decoded vs input) is <= this"},
     {"color", ParamSpec::Type::choice, "rgb", 0, 0, {"rgb", "dfmf"}, "rgb: colour in the matrix rows (paper); dfmf: per-channel log-luminance/chroma (Bonn DFMF model 11)"},
     {"svd", ParamSpec::Type::choice, "auto", 0, 0, {"auto", "exact", "randomized"}, "auto: exact when the small side of the matrix is <= 1024, or <= 4096 with rank + oversample >= 1/8 of it, else randomized"},
-    {"oversample", ParamSpec::Type::integer, "16", 0, 1024, {}, "randomized SVD: extra sketch columns"},
+    {"oversample", ParamSpec::Type::integer, "16", 0, 1024, {}, "randomized SVD: extra sketch columns (of the first Krylov block; from power_iters=2 on the later blocks are rank wide)"},
     {"power_iters", ParamSpec::Type::integer, "4", 0, 32, {},
      "randomized SVD: iterations q (in core: block Krylov, at most q + 1 blocks of 2 passes, stops when converged; "
      "out of core: block Krylov on the rows side, at most q + 2 reads of the data, stops when converged)"},
