@@ -27,7 +27,7 @@
 #            --seed 1 -o FILE`): the command line's out-of-core encode, `btfc compress FILE -c
 #            fmf:rank=R:power_iters=1:oversample=P --max-memory 1G` (the raw .btfc streamed in place
 #            from the page cache, its chunks mapped and unmapped in every pass), p 16 and 8
-#   mpi      with --btfc, where btfc-mpi was built: the same on 2 MPI ranks of one core each, p 16
+#   mpi      with --btfc, where btfc-mpi was built: the same on 2 MPI ranks of one core each, p 16 and 8
 #            (time: the factorization in the JSON; peak RSS: per rank)
 # Each run is its own process: time of the factorization only (not the load), relative L2 error
 # sqrt(||B||^2 - sum s_i^2) / ||B|| (both approximations are orthogonal projections of B, so this
@@ -103,7 +103,10 @@ for rep in $(seq 1 "$REPEAT"); do
     if [ -n "$BTFC_FILE" ]; then
       cl ooc "$r" 1 16 | tee -a "$LOG"
       cl ooc "$r" 1 8 | tee -a "$LOG"
-      if [ -x "$BUILD/btfc-mpi" ] && command -v mpirun > /dev/null; then cl mpi "$r" 1 16 | tee -a "$LOG"; fi
+      if [ -x "$BUILD/btfc-mpi" ] && command -v mpirun > /dev/null; then
+        cl mpi "$r" 1 16 | tee -a "$LOG"
+        cl mpi "$r" 1 8 | tee -a "$LOG"
+      fi
     fi
   done
 done

@@ -19,7 +19,7 @@
 #   ooc, mpi with --btfc FILE (the same BTF as a raw .btfc: `btfc synth --width 256 --height 256
 #            --seed 1 -o FILE`): the command line's out-of-core encode (`btfc compress FILE -c
 #            fmf:rank=R:color=dfmf:power_iters=1:oversample=P --max-memory 1G`, the raw .btfc
-#            streamed in place; p 16 and 8) and btfc-mpi's on 2 ranks of one core each (p 16):
+#            streamed in place; p 16 and 8) and btfc-mpi's on 2 ranks of one core each (p 16 and 8):
 #            the factorization's time with the automatic offset, peak RSS over the RGB input (per rank)
 # Errors are sqrt(||B||^2 - sum s_i^2) / ||B|| per channel (orthogonal projections: exact). A
 # run is at "equal error" when each of its three channel errors is within 1 % of the lowest any
@@ -116,7 +116,10 @@ for rep in $(seq 1 "$REPEAT"); do
     if [ -n "$BTFC_FILE" ]; then
       cl ooc "$r" 1 16 | tee -a "$LOG"
       cl ooc "$r" 1 8 | tee -a "$LOG"
-      if [ -x "$BUILD/btfc-mpi" ] && command -v mpirun > /dev/null; then cl mpi "$r" 1 16 | tee -a "$LOG"; fi
+      if [ -x "$BUILD/btfc-mpi" ] && command -v mpirun > /dev/null; then
+        cl mpi "$r" 1 16 | tee -a "$LOG"
+        cl mpi "$r" 1 8 | tee -a "$LOG"
+      fi
     fi
   done
 done
