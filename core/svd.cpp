@@ -427,7 +427,7 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
     r.total_energy = 0;
     column_sketch_product(B.data(), size_t(m), size_t(n), sketch, Y, &r.total_energy);  // B Pi, and ||B||_F^2
   }
-  if (!std::isfinite(r.total_energy)) return non_finite_input();
+  if (!std::isfinite(r.total_energy)) return non_finite_input();  // truncated_svd's contract (svd.h)
   step();
   int blocks = 0;
   Index g_cols = 0;  // columns of G filled

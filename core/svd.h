@@ -13,9 +13,9 @@
 //    l = C + oversample through Eigen and OpenBLAS, multi-threaded; B is never copied):
 //    block_krylov (default): randomized block Krylov (Musco and Musco 2015) on the rows side, up
 //    to q + 1 blocks kept side by side (for q >= 2 the first of l columns, the later ones of
-//    min(l, C), started from the first block's top Ritz vectors), two passes per block, no final pass
-//    (svd.cpp, krylov_svd), stopping early once a block no longer improves the rank-C error; at
-//    most 2q + 2 passes: a sparse sign sketch of B's columns (one add per element;
+//    min(l, C), started from the first block's top Ritz vectors), two passes per block, no final
+//    pass (svd.cpp, krylov_svd), stopping early once a block no longer improves the rank-C
+//    error; at most 2q + 2 passes: a sparse sign sketch of B's columns (one add per element;
 //    SvdOptions::sparse_sketch), then q + 1 passes B^T Q and q passes B X.
 //    power: Halko, Martinsson, Tropp 2011, Alg. 4.4 with re-orthonormalised power iterations:
 //    sketch Y = B Omega, q power iterations, Q = orth(Y), then the small SVD of Q^T B; 2q + 2

@@ -25,10 +25,10 @@
 // error of that basis, and once a block gains at most k_krylov_stop of it the basis takes
 // Q_{b+1} (free) and the last pass follows. Under a tight memory limit P holds only kept_blocks
 // blocks: when full, it restarts from its best l + (kept - 2) lk Ritz vectors P E (and W^T from
-// W^T E), then adds the next block (kept 1: the best l - lk, then power iterations of lk). The in-core path (svd.cpp) runs the
-// same iteration from the same Pi, so with every block kept both build the same basis (the same
-// error to float rounding); tests/ooc_test.cpp checks both against each other and against the
-// exact SVD.
+// W^T E), then adds the next block (kept 1: the best l - lk, then power iterations of lk). The
+// in-core path (svd.cpp) runs the same iteration from the same Pi, so with every block kept both
+// build the same basis (the same error to float rounding); tests/ooc_test.cpp checks both against
+// each other and against the exact SVD.
 //
 // Exact (streaming_exact_svd, ooc_exact.cpp): the in-core exact path's rows-side Gram method in
 // two passes: pass 1 G = sum_c B_c B_c^T (m x m, double) and ||B||_F^2, then G = E Lambda E^T
