@@ -104,17 +104,19 @@ int main(int argc, char** argv) {
     }
     // Passes over B: 2q + 2 for power, 2 per block for krylov; power's GEMMs all of width l =
     // rank + oversample, krylov's sketch (unless sparse: one add per element) and first B^T Q
-    // of width l, its later passes of width min(l, rank) from q 2 on (svd.h narrow_krylov_blocks).
+    // of width l, its later passes of width min(l, rank) from q 2 on (svd.h later_krylov_width).
     const bool power = scheme == RandomizedScheme::power;
     const int passes = power ? 2 * q + 2 : 2 * r->iterations;
     const bool sparse = r->sparse_start;
     const int gemms = passes - (sparse ? 1 : 0);
-    const double l = double(rank + p), lk = narrow_krylov_blocks(q + 1) ? std::min(l, double(rank)) : l;
+    const double l = double(rank + p), lk = double(later_krylov_width(q + 1, rank + p, rank));
     const double cols = power ? gemms * l : (sparse ? 0 : l) + l + (passes - 2) * lk;
     const double flops = 2.0 * double(m) * double(n) * cols;
-    std::printf("%-10s rank %d q %d p %d %s: %.2f s, rel L2 error %.6f, %d passes (%d GEMMs), %.0f GFLOP/s over the whole run, peak RSS %.2f GB (%.2f x input)\n",
-                label, rank, q, p, scheme == RandomizedScheme::power ? "power" : (sparse ? "krylov" : "krylov_dense"), secs,
-                r->rel_error_estimate(), passes, gemms, flops / secs / 1e9, peak_rss_gb(), peak_rss_gb() / input_gb);
+    std::printf(
+        "%-10s rank %d q %d p %d %s: %.2f s, rel L2 error %.6f, %d passes (%d GEMMs), %.0f GFLOP/s over the whole run, peak RSS %.2f GB "
+        "(%.2f x input)\n",
+        label, rank, q, p, power ? "power" : (sparse ? "krylov" : "krylov_dense"), secs, r->rel_error_estimate(), passes, gemms,
+        flops / secs / 1e9, peak_rss_gb(), peak_rss_gb() / input_gb);
     std::fflush(stdout);
     return r->rel_error_estimate();
   };

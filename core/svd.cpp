@@ -344,7 +344,7 @@ namespace {
 // (the remaining gap to the optimum then is a fraction of that), and before the basis would
 // exceed the small side of B (k_krylov_stop, svd.h).
 //
-// With q >= 2 (three blocks or more: narrow_krylov_blocks, svd.h) only the first block is l = C
+// With q >= 2 (three blocks or more: later_krylov_width, svd.h) only the first block is l = C
 // + oversample wide. Block 2 starts from B B^T Q_1 E, E the top lk = C eigenvectors of W_1 W_1^T
 // (Q_1 E: the first block's top C Ritz vectors), and every later block is C wide, started from
 // all of the block before: the basis is Q_1 plus the block Krylov space K_k(B B^T, B B^T Q_1 E).
@@ -404,7 +404,7 @@ Result<SvdResult> krylov_svd(ConstMapF& B, const SvdOptions& opt) {
 
   // Blocks after the first hold lk = min(l, C) columns when there can be three blocks or more,
   // started from the top lk Ritz vectors of the first block (the comment above).
-  const Index lk = narrow_krylov_blocks(max_blocks) ? std::min<Index>(l, Index(opt.max_rank)) : l;
+  const Index lk = later_krylov_width(max_blocks, l, opt.max_rank);
   // Few and small buffers, allocated once: fresh memory costs its page faults (1-6 ms per MB on
   // the VMs measured, docs/benchmarks.md), a sizeable part of a pass. W^T is the passes' own
   // float output (no double copy: the Gram matrix and the Ritz step convert it by blocks), and

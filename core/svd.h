@@ -175,9 +175,10 @@ size_t column_sketch_sums_bytes(size_t m, size_t n, Eigen::Index l);
 // fraction of that).
 constexpr double k_krylov_stop = 2e-3;
 
-// Whether block Krylov with up to max_blocks blocks makes its blocks after the first min(l, C)
-// wide (from three blocks on; svd.cpp krylov_svd), in core and streamed alike.
-constexpr bool narrow_krylov_blocks(int max_blocks) { return max_blocks >= 3; }
+// The width of block Krylov's blocks after the first (of l columns) for rank C and up to
+// max_blocks blocks: min(l, C) from three blocks on, else l (svd.cpp krylov_svd), in core and
+// streamed alike.
+constexpr Eigen::Index later_krylov_width(int max_blocks, Eigen::Index l, Eigen::Index C) { return max_blocks >= 3 && C < l ? C : l; }
 
 // B is column-major with leading dimension m. Fails on m == 0 or n == 0. The randomized method
 // fails with corrupt_data when B holds a NaN or an infinity, found in its first pass before any

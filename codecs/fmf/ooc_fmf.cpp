@@ -46,7 +46,7 @@ Result<StreamPlan> plan_streamed_fmf(const Params& p, const BtfDesc& desc, size_
   // The randomized dfmf stream's split parts (ooc_svd.h) hold at most a chunk's values as floats.
   plan.bytes_per_value = k_stream_bytes_per_value + (plan.dfmf ? 4 : 0);
   // Randomized (block Krylov, ooc_svd.h), keeping k blocks of at most l (width w <= k l: from
-  // q 2 on the later blocks are rank wide, svd.h narrow_krylov_blocks; the plan counts k l), per
+  // q 2 on the later blocks are rank wide, svd.h later_krylov_width; the plan counts k l), per
   // channel: on the rows the basis P (double) and, in the passes, the sum buffer (double), Q and B Z (float);
   // on the texels W^T (w, float) and SxV or the first pass's test matrix (l: the dense Gaussian
   // rows, or the sparse sketch's scratch, svd.h column_sketch_bytes, which is at most as large);

@@ -31,7 +31,7 @@ class Krylov {
       : m_m(m), m_opt(opt), m_l(Index(std::min<size_t>(std::min(m, n), size_t(opt.max_rank) + size_t(opt.oversample)))), m_wt(num_chunks) {
     m_max_blocks = int(std::max<Index>(1, std::min<Index>(opt.power_iters + 1, std::min<Index>(Index(m), Index(n)) / m_l)));
     m_kept = kept_blocks > 0 ? std::min(kept_blocks, m_max_blocks) : m_max_blocks;
-    m_lk = narrow_krylov_blocks(m_max_blocks) ? std::min<Index>(m_l, Index(opt.max_rank)) : m_l;
+    m_lk = later_krylov_width(m_max_blocks, m_l, opt.max_rank);
     m_bw = m_l;
     m_width = m_l + Index(m_kept - 1) * m_lk;
     m_sketch = make_column_sketch(n, m_l, opt);
@@ -152,7 +152,6 @@ class Krylov {
     const double err = m_energy > 0 ? std::sqrt(std::max(0.0, m_energy - got) / m_energy) : 0;
     const bool stop = m_blocks >= 2 && m_last_err - err <= k_krylov_stop * err;
     m_last_err = err;
-    const MatrixXd start = select ? MatrixXd(Y * evecs.rightCols(m_lk)) : MatrixXd(Y);
     Index at = w;
     if (full) {
       // The basis is full: restart from its best r = width - lk directions, its Ritz vectors
@@ -171,7 +170,10 @@ class Krylov {
       m_K.topLeftCorner(r, r) = ev.tail(r).asDiagonal();
       at = r;
     }
-    m_P.middleCols(at, m_lk) = start;
+    if (select)  // Y and evecs are the pass's own: the restart above changed neither
+      m_P.middleCols(at, m_lk) = Y * evecs.rightCols(m_lk);
+    else
+      m_P.middleCols(at, m_lk) = Y;
     orthonormalize_against(m_P, at, m_P.middleCols(at, m_lk));
     m_at = at, m_bw = m_lk;
     ++m_blocks;

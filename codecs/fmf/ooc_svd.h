@@ -14,7 +14,7 @@
 //                 block b of W^T = B^T P. Q_{b+1} = orth(Y) against the kept blocks (svd.h,
 //                 orthonormalize_against), P = [Q_1 .. Q_{b+1}] (m x (l + b lk), double). The
 //                 later blocks are lk = min(l, C) wide for q >= 2, as in core (svd.h
-//                 narrow_krylov_blocks; else lk = l): Q_2 = orth(Y E) for the top lk
+//                 later_krylov_width; else lk = l): Q_2 = orth(Y E) for the top lk
 //                 eigenvectors E of Q_1^T Y = Q_1^T B B^T Q_1 (B B^T on Q_1's top Ritz vectors),
 //                 so pass 1 is l wide and the later ones lk
 //   last pass     the newest block's B^T Q (one product) completes W^T; G = W W^T
